@@ -1,0 +1,43 @@
+"""Errors raised by GranLab.
+
+Every error names what is wrong and what is allowed, so that a user typing a
+value into the lab or a scene file knows how to fix it.
+"""
+
+
+class GranLabError(Exception):
+    """Base class of all GranLab errors."""
+
+
+class ParameterError(GranLabError, ValueError):
+    """An invalid parameter value.
+
+    The message reads ``<name> = <value> is not allowed: <what is allowed>``.
+    """
+
+    def __init__(self, name: str, value, allowed: str):
+        self.name = name
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"{name} = {value!r} is not allowed: {allowed}")
+
+
+class DivergenceError(GranLabError, RuntimeError):
+    """The run diverged; the simulation keeps its last good state.
+
+    Attributes: ``reason`` (text), ``step`` (the step at which the failure was
+    seen) and ``time`` (the simulated time of the last good state).
+    """
+
+    def __init__(self, reason: str, step: int, time: float):
+        self.reason = reason
+        self.step = step
+        self.time = time
+        super().__init__(
+            f"run diverged at step {step}: {reason}. "
+            f"The simulation was restored to its last good state (t = {time:.6g})."
+        )
+
+
+class SceneError(GranLabError, ValueError):
+    """A broken scene file: names the key and what is allowed."""

@@ -1,0 +1,316 @@
+"""Frozen, validated parameter dataclasses.
+
+Every constructor checks its values and raises :class:`ParameterError` naming
+the parameter, the value and what is allowed. Use :meth:`ContactLaw.replace`
+(and the like) to change a value at run time: the result is validated again.
+
+Sign conventions are those of the ratcheting paper: ``n`` points from ``j`` to
+``i``, ``t = z × n``, ``F_n > 0`` is repulsion, ``D_n < 0`` is an overlap.
+Stresses are counted positive in compression (Gilabert Sec. II A).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from .errors import ParameterError
+
+TANGENTIAL_MODELS = ("cundall-strack", "alpha", "angle")
+NORMAL_MODELS = ("linear", "area")
+WALL_MODES = ("fixed", "velocity", "force")
+CELL_CONTROLS = ("fixed", "stress", "strain-rate")
+
+
+def _number(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(name, value, "a real number")
+    value = float(value)
+    if math.isnan(value):
+        raise ParameterError(name, value, "a number, not NaN")
+    return value
+
+
+def finite(name: str, value) -> float:
+    value = _number(name, value)
+    if not math.isfinite(value):
+        raise ParameterError(name, value, "a finite number")
+    return value
+
+
+def positive(name: str, value, allow_inf: bool = False) -> float:
+    value = _number(name, value)
+    if not value > 0 or (math.isinf(value) and not allow_inf):
+        allowed = "a positive number" + (" or inf" if allow_inf else " (finite)")
+        raise ParameterError(name, value, allowed)
+    return value
+
+
+def nonnegative(name: str, value, allow_inf: bool = False) -> float:
+    value = _number(name, value)
+    if value < 0 or (math.isinf(value) and not allow_inf):
+        allowed = "a number >= 0" + (" or inf" if allow_inf else " (finite)")
+        raise ParameterError(name, value, allowed)
+    return value
+
+
+def choice(name: str, value, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise ParameterError(name, value, "one of " + ", ".join(repr(c) for c in choices))
+    return value
+
+
+def pair(name: str, value, check) -> tuple:
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ParameterError(name, value, "a pair of values (x, y)")
+    return (check(f"{name}[0]", value[0]), check(f"{name}[1]", value[1]))
+
+
+class _Replaceable:
+    def replace(self, **changes):
+        """A validated copy with ``changes`` applied (unknown names are refused)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        for key in changes:
+            if key not in names:
+                raise ParameterError(key, changes[key], "one of " + ", ".join(sorted(names)))
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class ContactLaw(_Replaceable):
+    """The interaction law between two disks (and between a disk and a wall).
+
+    - normal: ``N^e = -K_n D_n`` (ratcheting Eq. 6, Gilabert ``N^e = -K_N h``) or,
+      with ``normal_model="area"``, ``N^e = K_n A / l`` with ``A`` the overlap area and
+      ``l = r_i + r_j`` (``2 r_i`` for a wall), so ``K_n`` bounds its tangent stiffness
+      (ratcheting Sec. II B); viscous damping ``N^v = -eta V_n`` with
+      ``eta = zeta sqrt(4 K_n m_i m_j / (m_i + m_j))`` (Gilabert Eq. 6).
+    - cohesion: ``N^a = -F0 (1 - h/D0)`` for a gap ``0 <= h <= D0`` and ``-F0`` in
+      contact (Gilabert Eqs. 4-5).
+    - tangential: spring ``F_t = -K_t D_t - Gamma_t V_t`` (quasi-rigidity Eq. 7) with
+      ``|F_t| <= mu N^e`` (Gilabert Eq. 8); ``D_t`` follows ``tangential_model``:
+      ``"cundall-strack"`` (ratcheting Eqs. 7-11), ``"alpha"`` (Eqs. 23-25, 30) or
+      ``"angle"`` (Eqs. 18-22).
+    - rolling: moment ``-K_r dtheta`` with ``K_r |dtheta| <= mu_r N^e`` (Gilabert Eq. 10).
+
+    ``friction`` (mu) and ``rolling_friction`` (mu_r, a length) may be ``inf``.
+    """
+
+    normal_stiffness: float = 1000.0
+    tangential_stiffness: float = 1000.0
+    friction: float = 0.5
+    damping_ratio: float = 0.0
+    tangential_damping: float = 0.0
+    normal_model: str = "linear"
+    tangential_model: str = "cundall-strack"
+    cohesion_force: float = 0.0
+    cohesion_range: float = 0.0
+    rolling_stiffness: float = 0.0
+    rolling_friction: float = 0.0
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "normal_stiffness", positive("normal_stiffness", self.normal_stiffness))
+        set_(self, "tangential_stiffness", positive("tangential_stiffness", self.tangential_stiffness))
+        set_(self, "friction", nonnegative("friction", self.friction, allow_inf=True))
+        zeta = nonnegative("damping_ratio", self.damping_ratio)
+        if zeta >= 1.0:
+            raise ParameterError("damping_ratio", zeta, "a fraction of critical damping in [0, 1)")
+        set_(self, "damping_ratio", zeta)
+        set_(self, "tangential_damping", nonnegative("tangential_damping", self.tangential_damping))
+        choice("normal_model", self.normal_model, NORMAL_MODELS)
+        choice("tangential_model", self.tangential_model, TANGENTIAL_MODELS)
+        set_(self, "cohesion_force", nonnegative("cohesion_force", self.cohesion_force))
+        set_(self, "cohesion_range", nonnegative("cohesion_range", self.cohesion_range))
+        set_(self, "rolling_stiffness", nonnegative("rolling_stiffness", self.rolling_stiffness))
+        set_(self, "rolling_friction", nonnegative("rolling_friction", self.rolling_friction, allow_inf=True))
+
+
+@dataclass(frozen=True)
+class Integration(_Replaceable):
+    """Time stepping and neighbour-list settings.
+
+    - ``dt``: the time step; ``None`` means ``dt_safety`` times the stability bound
+      (see :func:`engine.simulation.stability_bound`). A ``dt`` above the bound is refused.
+    - ``skin``: Verlet skin added to the interaction range of the neighbour list;
+      ``None`` means 0.2 times the mean radius.
+    - ``max_overlap``: a run whose largest overlap exceeds this fraction of the smaller
+      radius of a contact is declared diverging.
+    - ``initial_overlap``: overlaps up to this fraction of the smaller radius are
+      accepted in an initial configuration (a prepared packing overlaps a little).
+    """
+
+    dt: float | None = None
+    dt_safety: float = 0.2
+    skin: float | None = None
+    max_overlap: float = 0.5
+    initial_overlap: float = 0.1
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        if self.dt is not None:
+            set_(self, "dt", positive("dt", self.dt))
+        safety = positive("dt_safety", self.dt_safety)
+        if safety > 1:
+            raise ParameterError("dt_safety", safety, "a fraction of the stability bound in (0, 1]")
+        set_(self, "dt_safety", safety)
+        if self.skin is not None:
+            set_(self, "skin", positive("skin", self.skin))
+        overlap = positive("max_overlap", self.max_overlap)
+        if overlap > 1:
+            raise ParameterError("max_overlap", overlap, "a fraction of the radius in (0, 1]")
+        set_(self, "max_overlap", overlap)
+        initial = nonnegative("initial_overlap", self.initial_overlap)
+        if initial >= overlap:
+            raise ParameterError("initial_overlap", initial, f"a fraction below max_overlap = {overlap}")
+        set_(self, "initial_overlap", initial)
+
+
+@dataclass(frozen=True)
+class Load(_Replaceable):
+    """A load ``base + amplitude (1 - cos(2 pi t / period + phase))`` (ratcheting Eqs. 1, 5).
+
+    For a wall whose load is per length, ``base`` is the pressure P0 and
+    ``amplitude`` is Delta sigma; otherwise both are forces.
+    """
+
+    base: float = 0.0
+    amplitude: float = 0.0
+    period: float = math.inf
+    phase: float = 0.0
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "base", finite("load.base", self.base))
+        set_(self, "amplitude", finite("load.amplitude", self.amplitude))
+        set_(self, "period", positive("load.period", self.period, allow_inf=True))
+        set_(self, "phase", finite("load.phase", self.phase))
+
+    @property
+    def angular_frequency(self) -> float:
+        return 2.0 * math.pi / self.period
+
+    def value(self, t: float) -> float:
+        return self.base + self.amplitude * (1.0 - math.cos(self.angular_frequency * t + self.phase))
+
+
+@dataclass(frozen=True)
+class Wall(_Replaceable):
+    """A rigid straight wall: the line ``normal · x = position``.
+
+    ``normal`` is a unit vector pointing into the domain (it is normalised). The wall
+    translates along its normal only; ``tangential_velocity`` slides its surface along
+    ``t = z × n`` (for a floor, ``n = +y`` and ``t = -x``).
+
+    - ``mode="fixed"``: does not move;
+    - ``mode="velocity"``: ``d position/dt = velocity`` (positive moves into the domain);
+    - ``mode="force"``: ``mass d²position/dt² = load(t) * length + force from the disks``,
+      where ``length`` is the distance between the two walls named in
+      ``load_per_length_of`` (the biaxial box of ratcheting Eq. 1) or 1 if it is ``None``.
+    """
+
+    normal: tuple[float, float] = (0.0, 1.0)
+    position: float = 0.0
+    mode: str = "fixed"
+    velocity: float = 0.0
+    tangential_velocity: float = 0.0
+    mass: float = 0.0
+    load: Load = Load()
+    load_per_length_of: tuple[str, str] | None = None
+    name: str = ""
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        nx, ny = pair(f"wall {self.name!r} normal", self.normal, finite)
+        norm = math.hypot(nx, ny)
+        if norm == 0:
+            raise ParameterError(f"wall {self.name!r} normal", self.normal, "a non-zero vector")
+        set_(self, "normal", (nx / norm, ny / norm))
+        set_(self, "position", finite(f"wall {self.name!r} position", self.position))
+        choice(f"wall {self.name!r} mode", self.mode, WALL_MODES)
+        set_(self, "velocity", finite(f"wall {self.name!r} velocity", self.velocity))
+        set_(self, "tangential_velocity", finite(f"wall {self.name!r} tangential_velocity", self.tangential_velocity))
+        if self.mode == "force":
+            set_(self, "mass", positive(f"wall {self.name!r} mass", self.mass))
+        else:
+            set_(self, "mass", nonnegative(f"wall {self.name!r} mass", self.mass))
+        if not isinstance(self.load, Load):
+            raise ParameterError(f"wall {self.name!r} load", self.load, "a Load")
+
+
+def box_walls(x0: float, x1: float, y0: float, y1: float, loads: dict[str, Load] | None = None,
+              wall_mass: float = 1.0) -> tuple[Wall, ...]:
+    """The four walls of a rectangular box ``[x0, x1] × [y0, y1]``: left, right, bottom, top.
+
+    A wall named in ``loads`` is force-controlled, its load applied per unit length of
+    the box side it closes (``F_x = sigma_x L_y``, ``F_y = sigma_y L_x``: ratcheting Eq. 1);
+    the others are fixed.
+    """
+    loads = dict(loads or {})
+    names = ("left", "right", "bottom", "top")
+    unknown = set(loads) - set(names)
+    if unknown:
+        raise ParameterError("loads", sorted(unknown), "wall names among left, right, bottom, top")
+    if not x1 > x0:
+        raise ParameterError("box x1", x1, f"greater than x0 = {x0}")
+    if not y1 > y0:
+        raise ParameterError("box y1", y1, f"greater than y0 = {y0}")
+    geometry = {
+        "left": ((1.0, 0.0), x0, ("bottom", "top")),
+        "right": ((-1.0, 0.0), -x1, ("bottom", "top")),
+        "bottom": ((0.0, 1.0), y0, ("left", "right")),
+        "top": ((0.0, -1.0), -y1, ("left", "right")),
+    }
+    walls = []
+    for name in names:
+        normal, position, across = geometry[name]
+        if name in loads:
+            walls.append(Wall(normal, position, "force", mass=wall_mass, load=loads[name],
+                              load_per_length_of=across, name=name))
+        else:
+            walls.append(Wall(normal, position, "fixed", name=name))
+    return tuple(walls)
+
+
+@dataclass(frozen=True)
+class PeriodicCell(_Replaceable):
+    """A rectangular cell ``[0, L_x) × [0, L_y)`` periodic along the chosen axes.
+
+    Along a periodic axis the length is ``"fixed"``, follows a prescribed
+    ``strain_rate`` (``-dL/dt / L0``, compression positive), or is ``"stress"``-controlled
+    by Gilabert Eq. 3: ``M d²eps/dt² = sigma^I - sigma^M`` with ``eps = -(L - L0)/L0``,
+    ``M = mass`` (``None``: 3/10 of the total grain mass divided by sqrt(L_x L_y),
+    as in Gilabert Sec. II A) and ``|d eps/dt| <= max_strain_rate``.
+    """
+
+    lengths: tuple[float, float] = (1.0, 1.0)
+    periodic: tuple[bool, bool] = (True, True)
+    control: tuple[str, str] = ("fixed", "fixed")
+    stress: tuple[float, float] = (0.0, 0.0)
+    strain_rate: tuple[float, float] = (0.0, 0.0)
+    mass: float | None = None
+    max_strain_rate: float = math.inf
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "lengths", pair("cell.lengths", self.lengths, positive))
+        if not isinstance(self.periodic, (tuple, list)) or len(self.periodic) != 2 or \
+                not all(isinstance(p, bool) for p in self.periodic):
+            raise ParameterError("cell.periodic", self.periodic, "a pair of booleans")
+        set_(self, "periodic", tuple(self.periodic))
+        if not any(self.periodic):
+            raise ParameterError("cell.periodic", self.periodic, "at least one periodic axis")
+        if not isinstance(self.control, (tuple, list)) or len(self.control) != 2:
+            raise ParameterError("cell.control", self.control, "a pair of controls")
+        for axis in range(2):
+            choice(f"cell.control[{axis}]", self.control[axis], CELL_CONTROLS)
+            if self.control[axis] != "fixed" and not self.periodic[axis]:
+                raise ParameterError(f"cell.control[{axis}]", self.control[axis],
+                                     "'fixed' along a non-periodic axis")
+        set_(self, "control", tuple(self.control))
+        set_(self, "stress", pair("cell.stress", self.stress, finite))
+        set_(self, "strain_rate", pair("cell.strain_rate", self.strain_rate, finite))
+        if self.mass is not None:
+            set_(self, "mass", positive("cell.mass", self.mass))
+        set_(self, "max_strain_rate", positive("cell.max_strain_rate", self.max_strain_rate, allow_inf=True))
