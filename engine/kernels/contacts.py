@@ -1,0 +1,270 @@
+"""The one generic contact loop: geometry of each row of the contact table, then the laws.
+
+Forces are accumulated per chunk of rows into private buffers (no write races
+between threads); :func:`engine.kernels.integrate.gather_and_kick` sums them.
+
+Per row, with ``r = x_i - x_j - image · L`` (for a wall: the distance to the wall
+along its normal), ``n = r/|r|``, ``t = z × n``:
+
+- ``V_n = (v_i - v_j) · n`` and ``(v_i - v_j) · t`` include the affine velocity of a
+  deforming periodic cell and the velocity of a moving wall;
+- Cundall-Strack: ``dD_t/dt = (v_i - v_j)·t - r_i w_i - r_j w_j`` (ratcheting Eq. 9);
+- alpha-corrected: ``dD_t/dt = alpha (v_i - v_j)·t - r_i w_i - r_j w_j`` with
+  ``alpha = (r_i + r_j)/|r|`` (Eqs. 24-25), tangential force ``alpha F_t`` on the centres (Eq. 30);
+- angle-based: ``D_t = r_i wrap(phi + pi - theta_i - a_i) + r_j wrap(phi - theta_j - a_j)``
+  from the body-frame angles ``a`` of the material points of first contact (Eqs. 19, 21-22),
+  force as for alpha; its rate is Eq. 24;
+- the moment of ``F_t`` is ``-r F_t`` on both disks; the rolling moment ``-K_r dtheta`` on i
+  and ``+K_r dtheta`` on j with ``d dtheta/dt = w_i - w_j`` (Gilabert Eq. 10).
+
+On sliding, both anchors move by half the slip, so the rolling distance of Eq. 20 is kept.
+"""
+
+import math
+
+from numba import njit, prange, uint64
+
+from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from .jit import JIT, PARALLEL
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, coulomb,
+                   normal_elastic, rolling, wrap_angle)
+
+# per-chunk scalar tallies
+TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
+TALLY_VXX, TALLY_VXY, TALLY_VYX, TALLY_VYY = 4, 5, 6, 7
+TALLY_OVERLAPPING, TALLY_MAX_OVERLAP, TALLY_OPENING = 8, 9, 10
+TALLY_SIZE = 11
+
+
+@njit(**JIT)
+def forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force, kt, kr):
+    """Row ``k`` stops interacting: its history is forgotten (ratcheting Sec. III A).
+
+    Returns the energy its tangential and rolling springs held if it was touching: released
+    without doing work when a contact opens, it is tallied as dissipated.
+    """
+    released = 0.0
+    if status[k] == STATUS_STICK or status[k] == STATUS_SLIDE_POS or status[k] == STATUS_SLIDE_NEG:
+        released = 0.5 * kt * tangential_spring[k] ** 2 + 0.5 * kr * rolling_spring[k] ** 2
+    status[k] = STATUS_NONE
+    tangential_spring[k] = 0.0
+    rolling_spring[k] = 0.0
+    normal_force[k] = 0.0
+    tangential_force[k] = 0.0
+    return released
+
+
+@njit(**PARALLEL)
+def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, n_chunks,
+                   force_buffer, torque_buffer, wall_buffer, tally_buffer):
+    """Contact forces of every row of ``ct``, accumulated into chunk buffers.
+
+    Counts the contacts whose overlap exceeds ``overlap_limit`` times the smaller radius
+    (``TALLY_OVERLAPPING``) and the largest such ratio (``TALLY_MAX_OVERLAP``).
+
+    ``force_buffer (T, N, 2)``, ``torque_buffer (T, N)`` must be zero on entry (the
+    gather step zeroes them); ``wall_buffer (T, nw)`` and ``tally_buffer (T, TALLY_SIZE)``
+    are overwritten. Updates the history and results of each row in place.
+    """
+    position = p.position
+    velocity = p.velocity
+    angle = p.angle
+    omega = p.omega
+    radius = p.radius
+    wall_normal = w.normal
+    wall_offset = w.offset
+    wall_velocity = w.velocity
+    wall_tangential_velocity = w.tangential_velocity
+    wall_tangential_position = w.tangential_position
+    length_x = cell.length[0]
+    length_y = cell.length[1]
+    strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
+    strain_y = cell.rate[1] / length_y if length_y > 0.0 else 0.0
+    particle_i = ct.particle_i
+    particle_j = ct.particle_j
+    image = ct.image
+    root_reduced_mass = ct.root_reduced_mass
+    tangential_spring = ct.tangential_spring
+    anchor_i = ct.anchor_angle_i
+    anchor_j = ct.anchor_angle_j
+    rolling_spring = ct.rolling_spring
+    status = ct.status
+    normal_force = ct.normal_force
+    tangential_force = ct.tangential_force
+    surface_gap = ct.surface_gap
+    count = ct.count[0]
+    n = uint64(position.shape[0])
+    kn = law[KN]
+    kt = law[KT]
+    mu = law[MU]
+    gamma_t = law[GAMMA_T]
+    f0 = law[F0]
+    d0 = law[D0]
+    kr = law[KR]
+    mu_r = law[MU_R]
+    eta_factor = 2.0 * law[ZETA] * math.sqrt(kn)
+    nw = wall_offset.shape[0]
+
+    for c in prange(n_chunks):
+        lo = uint64(c * count // n_chunks)
+        hi = uint64((c + 1) * count // n_chunks)
+        for m in range(nw):
+            wall_buffer[c, m] = 0.0
+        damping = 0.0
+        sliding = 0.0
+        rolling_loss = 0.0
+        wall_work = 0.0
+        vxx = 0.0
+        vxy = 0.0
+        vyx = 0.0
+        vyy = 0.0
+        overlapping = 0
+        max_overlap = 0.0
+        opening = 0.0
+        for k in range(lo, hi):
+            i = uint64(particle_i[k])
+            j = uint64(particle_j[k])
+            ri = radius[i]
+            is_wall = j >= n
+            wall_vx = 0.0
+            wall_vy = 0.0
+            if not is_wall:
+                rj = radius[j]
+                rx = position[i, 0] - position[j, 0] - image[k, 0] * length_x
+                ry = position[i, 1] - position[j, 1] - image[k, 1] * length_y
+                r2 = rx * rx + ry * ry
+                reach = ri + rj + d0
+                if r2 >= reach * reach:
+                    if status[k] != STATUS_NONE:
+                        opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
+                                          tangential_force, kt, kr)
+                    surface_gap[k] = math.sqrt(r2) - ri - rj
+                    continue
+                dist = math.sqrt(r2)
+                inv_dist = 1.0 / dist
+                nx = rx * inv_dist
+                ny = ry * inv_dist
+                dvx = velocity[i, 0] - velocity[j, 0] + strain_x * rx
+                dvy = velocity[i, 1] - velocity[j, 1] + strain_y * ry
+                spin_sum = ri * omega[i] + rj * omega[j]
+                relative_spin = omega[i] - omega[j]
+                alpha = (ri + rj) * inv_dist
+                gap = dist - ri - rj
+            else:
+                wall = j - n
+                rj = 0.0
+                nx = wall_normal[wall, 0]
+                ny = wall_normal[wall, 1]
+                dist = nx * position[i, 0] + ny * position[i, 1] - wall_offset[wall]
+                gap = dist - ri
+                if gap >= d0:
+                    if status[k] != STATUS_NONE:
+                        opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
+                                          tangential_force, kt, kr)
+                    surface_gap[k] = gap
+                    continue
+                rx = dist * nx
+                ry = dist * ny
+                wall_vx = wall_velocity[wall] * nx - wall_tangential_velocity[wall] * ny
+                wall_vy = wall_velocity[wall] * ny + wall_tangential_velocity[wall] * nx
+                dvx = velocity[i, 0] - wall_vx
+                dvy = velocity[i, 1] - wall_vy
+                spin_sum = ri * omega[i]
+                relative_spin = omega[i]
+                alpha = 1.0
+            tx = -ny
+            ty = nx
+            vn = dvx * nx + dvy * ny
+            vt = dvx * tx + dvy * ty
+            surface_gap[k] = gap
+            ft = 0.0
+            moment = 0.0
+            if gap < 0.0:
+                overlap = -gap
+                limit_radius = ri if is_wall else min(ri, rj)
+                if overlap > overlap_limit * limit_radius:
+                    overlapping += 1
+                    max_overlap = max(max_overlap, overlap / limit_radius)
+                ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
+                eta = eta_factor * root_reduced_mass[k]
+                fn = ne - eta * vn - f0
+                damping += eta * vn * vn * dt
+                fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
+                if fresh:
+                    phi = math.atan2(ny, nx)
+                    anchor_i[k] = phi + math.pi - angle[i]
+                    if is_wall:
+                        anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_tangential_position[j - n]
+                    else:
+                        anchor_j[k] = phi - angle[j]
+                    tangential_spring[k] = 0.0
+                    rolling_spring[k] = 0.0
+                if tangential_model == TANGENTIAL_CS:
+                    rate = vt - spin_sum
+                else:
+                    rate = alpha * vt - spin_sum
+                if tangential_model == TANGENTIAL_ANGLE:
+                    phi = math.atan2(ny, nx)
+                    trial = ri * wrap_angle(phi + math.pi - angle[i] - anchor_i[k])
+                    if is_wall:
+                        trial += (tx * position[i, 0] + ty * position[i, 1]
+                                  - wall_tangential_position[j - n] - anchor_j[k])
+                    else:
+                        trial += rj * wrap_angle(phi - angle[j] - anchor_j[k])
+                elif fresh:
+                    trial = 0.0
+                else:
+                    trial = tangential_spring[k] + rate * dt
+                spring, ft, state, slip = coulomb(kt, mu, gamma_t, ne, trial, rate)
+                if state == STATUS_STICK:
+                    damping -= (ft + kt * spring) * rate * dt
+                else:
+                    sliding += abs(ft * slip)
+                    anchor_i[k] += 0.5 * slip / ri
+                    anchor_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
+                tangential_spring[k] = spring
+                status[k] = state
+                if kr > 0.0:
+                    roll_trial = 0.0 if fresh else rolling_spring[k] + relative_spin * dt
+                    roll, moment, roll_slip = rolling(kr, mu_r, ne, roll_trial)
+                    rolling_loss += abs(moment * roll_slip)
+                    rolling_spring[k] = roll
+            elif f0 > 0.0:
+                opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
+                                  kt, kr)
+                fn = -f0 * (1.0 - gap / d0)
+                status[k] = STATUS_COHESIVE
+            else:
+                opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
+                                  kt, kr)
+                continue
+            normal_force[k] = fn
+            tangential_force[k] = ft
+            ft_centre = ft if tangential_model == TANGENTIAL_CS else alpha * ft
+            fx = fn * nx + ft_centre * tx
+            fy = fn * ny + ft_centre * ty
+            force_buffer[c, i, 0] += fx
+            force_buffer[c, i, 1] += fy
+            torque_buffer[c, i] += -ri * ft + moment
+            if is_wall:
+                wall_buffer[c, j - n] -= fx * nx + fy * ny
+                wall_work += (fx * wall_vx + fy * wall_vy) * dt
+            else:
+                force_buffer[c, j, 0] -= fx
+                force_buffer[c, j, 1] -= fy
+                torque_buffer[c, j] += -rj * ft - moment
+                vxx += fx * rx
+                vxy += fx * ry
+                vyx += fy * rx
+                vyy += fy * ry
+        tally_buffer[c, TALLY_DAMPING] = damping
+        tally_buffer[c, TALLY_SLIDING] = sliding
+        tally_buffer[c, TALLY_ROLLING] = rolling_loss
+        tally_buffer[c, TALLY_WALL_WORK] = wall_work
+        tally_buffer[c, TALLY_VXX] = vxx
+        tally_buffer[c, TALLY_VXY] = vxy
+        tally_buffer[c, TALLY_VYX] = vyx
+        tally_buffer[c, TALLY_VYY] = vyy
+        tally_buffer[c, TALLY_OVERLAPPING] = overlapping
+        tally_buffer[c, TALLY_MAX_OVERLAP] = max_overlap
+        tally_buffer[c, TALLY_OPENING] = opening

@@ -1,0 +1,339 @@
+"""Velocity-Verlet time stepping of disks, walls and the periodic cell.
+
+:func:`advance` runs ``n_steps`` steps without returning to Python. One step:
+
+1. half kick ``v += dt/2 f/m``, ``w += dt/2 tau/I`` of disks, force-controlled walls and
+   a stress-controlled cell (Gilabert Eq. 3); drift of walls, cell lengths (applied
+   affinely to positions), positions and angles by ``dt``;
+2. if some disk, wall or cell length moved so far since the last rebuild that a pair could
+   have come within range unseen, rebuild the contact table at the current positions
+   (history carried over);
+3. contact forces at the new positions (half-step velocities in the viscous terms);
+4. gravity and applied loads, second half kick; energy tallies; divergence checks.
+
+Inside one call the second half kick of a step and the first half kick and drift of the
+next are one pass over the disks (leapfrog form). Between calls the state is always at a
+whole step, except when the contact table overflows: the call then returns in the middle
+of a step (``FLAG_PHASE`` = drifted) and the next call, with a larger table, resumes it.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange, uint64
+
+from ..state import CELL_NONE, CELL_STRAIN_RATE, CELL_STRESS, WALL_FIXED, WALL_FORCE
+from .contacts import (TALLY_DAMPING, TALLY_MAX_OVERLAP, TALLY_OPENING, TALLY_OVERLAPPING, TALLY_ROLLING,
+                       TALLY_SLIDING, TALLY_VXX, TALLY_WALL_WORK, contact_forces)
+from .jit import JIT, PARALLEL
+from .laws import D0
+from .neighbours import build_table, copy_table
+
+CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP = range(5)
+
+# energy tallies accumulated over the run (work done on the disks is positive)
+(E_DAMPING, E_SLIDING, E_ROLLING, E_OPENING, E_WALL_WORK, E_CELL_WORK, E_PRESCRIBED_WORK,
+ E_EXTERNAL_WORK) = range(8)
+ENERGY_TALLY_SIZE = 8
+
+# results of a particle pass
+G_KINETIC_X, G_KINETIC_Y, G_PRESCRIBED, G_EXTERNAL, G_DISPLACEMENT, G_BAD = range(6)
+GATHER_SIZE = 6
+
+# flags
+FLAG_REBUILD, FLAG_PHASE = 0, 1
+FLAG_SIZE = 2
+PHASE_ON_STEP, PHASE_DRIFTED = 0, 1
+
+# info written by advance
+INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS = range(5)
+INFO_SIZE = 5
+
+
+@njit(**PARALLEL)
+def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, gather, half, kick, drift,
+                  scale_x, scale_y, reference, out):
+    """One pass over the disks: gather forces, kick, drift.
+
+    - ``gather``: sum the chunk buffers into ``force``/``torque`` (zeroing the buffers),
+      add gravity and, if ``has_loads``, the applied loads; tally, with the whole-step
+      velocity ``v + half f/m``, the kinetic stress ``sum m v_a²``, the work of prescribed
+      motions and of applied loads over ``2 half``;
+    - kick ``v += kick f/m``, ``w += kick tau/I`` (dynamic disks only);
+    - drift ``x = x scale + drift v``, ``theta += drift w`` (every disk).
+
+    Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
+    distance of a disk from its neighbour-list ``reference``, the number of non-finite disks.
+    """
+    position = p.position
+    velocity = p.velocity
+    angle = p.angle
+    omega = p.omega
+    mass = p.mass
+    inv_mass = p.inv_mass
+    inv_inertia = p.inv_inertia
+    force = p.force
+    torque = p.torque
+    external_force = p.external_force
+    external_torque = p.external_torque
+    gx = gravity[0]
+    gy = gravity[1]
+    work_dt = 2.0 * half
+    kinetic_x = 0.0
+    kinetic_y = 0.0
+    prescribed = 0.0
+    external = 0.0
+    displacement = 0.0
+    bad = 0
+    n = uint64(position.shape[0])
+    for i in prange(n):
+        fx = force[i, 0]
+        fy = force[i, 1]
+        tq = torque[i]
+        vx = velocity[i, 0]
+        vy = velocity[i, 1]
+        w = omega[i]
+        im = inv_mass[i]
+        if gather:
+            fx = 0.0
+            fy = 0.0
+            tq = 0.0
+            for c in range(n_chunks):
+                fx += force_buffer[c, i, 0]
+                fy += force_buffer[c, i, 1]
+                tq += torque_buffer[c, i]
+                force_buffer[c, i, 0] = 0.0
+                force_buffer[c, i, 1] = 0.0
+                torque_buffer[c, i] = 0.0
+            if im > 0.0:
+                m = mass[i]
+                fx += m * gx
+                fy += m * gy
+                if has_loads:
+                    efx = external_force[i, 0]
+                    efy = external_force[i, 1]
+                    etq = external_torque[i]
+                    fx += efx
+                    fy += efy
+                    tq += etq
+                    external += (efx * (vx + half * fx * im) + efy * (vy + half * fy * im)
+                                 + etq * (w + half * tq * inv_inertia[i])) * work_dt
+                vx_step = vx + half * fx * im
+                vy_step = vy + half * fy * im
+                kinetic_x += m * vx_step * vx_step
+                kinetic_y += m * vy_step * vy_step
+            else:
+                prescribed -= (fx * vx + fy * vy + tq * w) * work_dt
+            force[i, 0] = fx
+            force[i, 1] = fy
+            torque[i] = tq
+        if im > 0.0:
+            vx += kick * fx * im
+            vy += kick * fy * im
+            w += kick * tq * inv_inertia[i]
+            velocity[i, 0] = vx
+            velocity[i, 1] = vy
+            omega[i] = w
+        x = position[i, 0] * scale_x + drift * vx
+        y = position[i, 1] * scale_y + drift * vy
+        position[i, 0] = x
+        position[i, 1] = y
+        angle[i] += drift * w
+        dx = x - reference[i, 0]
+        dy = y - reference[i, 1]
+        displacement = max(displacement, dx * dx + dy * dy)
+        if not math.isfinite(vx + vy + w + x + y):
+            bad += 1
+    out[G_KINETIC_X] = kinetic_x
+    out[G_KINETIC_Y] = kinetic_y
+    out[G_PRESCRIBED] = prescribed
+    out[G_EXTERNAL] = external
+    out[G_DISPLACEMENT] = displacement
+    out[G_BAD] = bad
+
+
+@njit(**JIT)
+def wall_load(w, m, t):
+    """Applied force on wall ``m`` at time ``t``: ``sigma(t)`` times the box length it spans."""
+    base = w.load[m, 0]
+    amplitude = w.load[m, 1]
+    sigma = base + amplitude * (1.0 - math.cos(w.load[m, 2] * t + w.load[m, 3]))
+    a = w.length_ref[m, 0]
+    if a < 0:
+        return sigma
+    b = w.length_ref[m, 1]
+    return sigma * -(w.offset[a] + w.offset[b])
+
+
+@njit(**JIT)
+def walls_step(w, t, kick, drift):
+    """Kick force-controlled walls with the load at ``t`` and the disks' push; drift moving walls."""
+    for m in range(w.offset.shape[0]):
+        if w.mode[m] == WALL_FORCE:
+            w.velocity[m] += kick * (wall_load(w, m, t) + w.particle_force[m]) * w.inv_mass[m]
+    for m in range(w.offset.shape[0]):
+        if w.mode[m] != WALL_FIXED:
+            w.offset[m] += drift * w.velocity[m]
+        w.tangential_position[m] += drift * w.tangential_velocity[m]
+
+
+@njit(**JIT)
+def measured_stress(cell, axis):
+    """Gilabert's sigma^M_aa = (sum m v_a² + sum f_a r_a) / A (compression positive)."""
+    area = cell.length[0] * cell.length[1]
+    return (cell.kinetic[axis] + cell.virial[axis, axis]) / area
+
+
+@njit(**JIT)
+def cell_step(cell, kick, drift, scale):
+    """Kick a stress-controlled length (d²L/dt² = L0 (sigma^M - sigma^I) / M, Gilabert Eq. 3,
+    with |dL/dt| <= max_strain_rate L0), then drift the lengths.
+
+    ``scale`` gets the affine factors of the drift; returns the work of the deformation on
+    the contacts (``-sum_a (dL_a / L_a) virial_aa``).
+    """
+    work = 0.0
+    for a in range(2):
+        scale[a] = 1.0
+        if cell.control[a] == CELL_STRESS:
+            mismatch = measured_stress(cell, a) - cell.target_stress[a]
+            cell.rate[a] += kick * cell.reference_length[a] * mismatch / cell.mass[0]
+            cap = cell.max_strain_rate[0] * cell.reference_length[a]
+            cell.rate[a] = min(cap, max(-cap, cell.rate[a]))
+        if cell.control[a] == CELL_STRESS or cell.control[a] == CELL_STRAIN_RATE:
+            new_length = cell.length[a] + drift * cell.rate[a]
+            scale[a] = new_length / cell.length[a]
+            work -= (scale[a] - 1.0) * cell.virial[a, a]
+            cell.length[a] = new_length
+    return work
+
+
+@njit(**JIT)
+def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, n_chunks):
+    """Contact forces into the chunk buffers; walls' reactions, virial and energy tallies."""
+    contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, max_overlap, n_chunks,
+                   ws.force_buffer, ws.torque_buffer, ws.wall_buffer, ws.tally_buffer)
+    for m in range(w.offset.shape[0]):
+        total = 0.0
+        for c in range(n_chunks):
+            total += ws.wall_buffer[c, m]
+        w.particle_force[m] = total
+    tallies = ws.tally_buffer
+    for a in range(2):
+        for b in range(2):
+            total = 0.0
+            for c in range(n_chunks):
+                total += tallies[c, TALLY_VXX + 2 * a + b]
+            cell.virial[a, b] = total
+    worst = 0.0
+    overlapping = 0.0
+    for c in range(n_chunks):
+        ws.energy[E_DAMPING] += tallies[c, TALLY_DAMPING]
+        ws.energy[E_SLIDING] += tallies[c, TALLY_SLIDING]
+        ws.energy[E_ROLLING] += tallies[c, TALLY_ROLLING]
+        ws.energy[E_OPENING] += tallies[c, TALLY_OPENING]
+        ws.energy[E_WALL_WORK] += tallies[c, TALLY_WALL_WORK]
+        overlapping += tallies[c, TALLY_OVERLAPPING]
+        worst = max(worst, tallies[c, TALLY_MAX_OVERLAP])
+    ws.info[INFO_OVERLAPPING] = overlapping
+    ws.info[INFO_MAX_OVERLAP] = worst
+
+
+@njit(**JIT)
+def rebuild(p, w, cell, ct, spare, ws, law, skin):
+    """Rebuild the contact table into ``spare``, then commit it to ``ct``. Returns a code."""
+    periodic = np.empty(2, dtype=np.bool_)
+    for a in range(2):
+        periodic[a] = cell.control[a] != CELL_NONE
+    needed, lost = build_table(p.position, p.radius, p.inv_mass, cell.length, periodic, w.normal, w.offset,
+                               law[D0] + skin, ct, spare, ws.wrapped, ws.wraps)
+    if needed > spare.particle_i.shape[0]:
+        ws.info[INFO_NEEDED] = needed
+        return CODE_OVERFLOW
+    if lost > 0:
+        ws.info[INFO_LOST] = lost
+        return CODE_LOST_CONTACT
+    copy_table(spare, ct)
+    for i in range(p.position.shape[0]):
+        for a in range(2):
+            p.position[i, a] = ws.wrapped[i, a]
+            ws.reference[i, a] = ws.wrapped[i, a]
+    for m in range(w.offset.shape[0]):
+        ws.wall_reference[m] = w.offset[m]
+    for a in range(2):
+        ws.length_reference[a] = cell.length[a]
+    ws.flags[FLAG_REBUILD] = 0
+    ws.info[INFO_REBUILDS] += 1
+    return CODE_OK
+
+
+@njit(**JIT)
+def _needs_rebuild(w, cell, ws, skin):
+    """Whether a pair distance may have changed by the skin since the last rebuild."""
+    moved = math.sqrt(ws.gather[G_DISPLACEMENT])
+    wall_move = 0.0
+    for m in range(w.offset.shape[0]):
+        wall_move = max(wall_move, abs(w.offset[m] - ws.wall_reference[m]))
+    cell_move = 0.0
+    for a in range(2):
+        if cell.control[a] != CELL_NONE:
+            cell_move += 2.0 * abs(cell.length[a] - ws.length_reference[a])
+    return moved + max(moved, wall_move) + cell_move >= skin
+
+
+@njit(**JIT)
+def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, half, kick, drift, scale):
+    particle_pass(p, ws.force_buffer, ws.torque_buffer, n_chunks, gravity, has_loads, gather, half, kick, drift,
+                  scale[0], scale[1], ws.reference, ws.gather)
+    if gather:
+        cell.kinetic[0] = ws.gather[G_KINETIC_X]
+        cell.kinetic[1] = ws.gather[G_KINETIC_Y]
+        ws.energy[E_PRESCRIBED_WORK] += ws.gather[G_PRESCRIBED]
+        ws.energy[E_EXTERNAL_WORK] += ws.gather[G_EXTERNAL]
+
+
+@njit(**JIT)
+def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time, n_steps,
+            skin, max_overlap, n_chunks):
+    """Run up to ``n_steps`` velocity-Verlet steps from ``time``; returns ``(steps_done, code)``.
+
+    ``dt = 0`` with ``n_steps = 1`` only evaluates the forces of the current state.
+    """
+    scale = np.ones(2)
+    half = 0.5 * dt
+    step = 0
+    if n_steps == 0:
+        return 0, CODE_OK
+    if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
+        walls_step(w, time, half, dt)
+        ws.energy[E_CELL_WORK] += cell_step(cell, half, dt, scale)
+        _pass(p, cell, ws, gravity, has_loads, n_chunks, False, 0.0, half, dt, scale)
+        ws.flags[FLAG_PHASE] = PHASE_DRIFTED
+        if _needs_rebuild(w, cell, ws, skin):
+            ws.flags[FLAG_REBUILD] = 1
+    while True:
+        if ws.flags[FLAG_REBUILD]:
+            code = rebuild(p, w, cell, ct, spare, ws, law, skin)
+            if code != CODE_OK:
+                return step, code
+        contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, n_chunks)
+        t = time + (step + 1) * dt
+        last = step + 1 == n_steps
+        if last:
+            walls_step(w, t, half, 0.0)
+            cell_step(cell, half, 0.0, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, half, half, 0.0, scale)
+            ws.flags[FLAG_PHASE] = PHASE_ON_STEP
+        else:
+            walls_step(w, t, dt, dt)
+            ws.energy[E_CELL_WORK] += cell_step(cell, dt, dt, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, half, dt, dt, scale)
+        step += 1
+        if ws.gather[G_BAD] > 0:
+            return step, CODE_NAN
+        if ws.info[INFO_OVERLAPPING] > 0:
+            return step, CODE_OVERLAP
+        if last:
+            return step, CODE_OK
+        if _needs_rebuild(w, cell, ws, skin):
+            ws.flags[FLAG_REBUILD] = 1

@@ -1,0 +1,178 @@
+"""Contact laws: small scalar functions called by the one generic contact loop.
+
+Conventions (ratcheting paper, Fig. 7): ``n`` points from j to i, ``t = z × n``,
+``F_n > 0`` repels, ``D_n < 0`` is an overlap (Gilabert's ``h = D_n``). The
+elastic repulsive part ``N^e >= 0`` alone bounds the tangential force and the
+rolling moment (Gilabert Eqs. 8, 10).
+
+The runtime parameters travel in one float64 vector indexed by ``KN, KT, ...``
+(see :func:`engine.simulation.law_vector`), so a slider never recompiles a kernel.
+"""
+
+import math
+
+from numba import njit
+
+from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from .jit import JIT
+
+# layout of the law vector
+KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R = range(9)
+LAW_SIZE = 9
+
+NORMAL_LINEAR, NORMAL_AREA = 0, 1
+TANGENTIAL_CS, TANGENTIAL_ALPHA, TANGENTIAL_ANGLE = 0, 1, 2
+
+TWO_PI = 2.0 * math.pi
+
+# 8-point Gauss-Legendre nodes and weights on [0, 1]
+_GL_NODES = (0.019855071751231856, 0.10166676129318664, 0.2372337950418355, 0.4082826787521751,
+             0.5917173212478249, 0.7627662049581645, 0.8983332387068134, 0.9801449282487681)
+_GL_WEIGHTS = (0.05061426814518813, 0.11119051722668724, 0.15685332293894363, 0.18134189168918100,
+               0.18134189168918100, 0.15685332293894363, 0.11119051722668724, 0.05061426814518813)
+
+
+@njit(**JIT)
+def wrap_angle(x):
+    """``x`` brought into [-pi, pi)."""
+    return x - TWO_PI * math.floor((x + math.pi) / TWO_PI)
+
+
+@njit(**JIT)
+def _x_minus_sin_x(x):
+    if abs(x) < 0.2:
+        x2 = x * x
+        return x * x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0)))
+    return x - math.sin(x)
+
+
+@njit(**JIT)
+def segment_area(r, h):
+    """Area of the circular segment of height ``h`` (0 <= h <= 2r) of a disk of radius ``r``.
+
+    Written with the half-angle ``beta`` (area ``r²/2 (2 beta - sin 2 beta)``) so that it
+    keeps full relative precision for the tiny overlaps of stiff grains.
+    """
+    if h <= 0.0:
+        return 0.0
+    if h >= 2.0 * r:
+        return math.pi * r * r
+    beta = math.atan2(math.sqrt(h * (2.0 * r - h)), r - h)
+    return 0.5 * r * r * _x_minus_sin_x(2.0 * beta)
+
+
+@njit(**JIT)
+def overlap_area(overlap, ri, rj, is_wall):
+    """Overlap area of disk i with disk j (or with a wall) for an overlap ``-D_n``."""
+    if overlap <= 0.0:
+        return 0.0
+    if is_wall:
+        return segment_area(ri, overlap)
+    dist = ri + rj - overlap
+    if dist <= abs(ri - rj):
+        r = min(ri, rj)
+        return math.pi * r * r
+    hi = overlap * (rj - ri + dist) / (2.0 * dist)
+    hj = overlap * (ri - rj + dist) / (2.0 * dist)
+    return segment_area(ri, hi) + segment_area(rj, hj)
+
+
+@njit(**JIT)
+def normal_elastic(normal_model, kn, overlap, ri, rj, is_wall):
+    """Elastic repulsion ``N^e >= 0`` for an overlap ``-D_n`` (zero when apart).
+
+    Linear: ``K_n (-D_n)`` (ratcheting Eq. 6). Area: ``K_n A / l`` with ``l = r_i + r_j``
+    (``2 r_i`` for a wall), whose tangent stiffness ``K_n chord / l`` never exceeds K_n.
+    """
+    if overlap <= 0.0:
+        return 0.0
+    if normal_model == NORMAL_LINEAR:
+        return kn * overlap
+    length = 2.0 * ri if is_wall else ri + rj
+    return kn * overlap_area(overlap, ri, rj, is_wall) / length
+
+
+@njit(**JIT)
+def normal_potential(normal_model, kn, overlap, ri, rj, is_wall):
+    """Energy stored by the normal spring: the integral of ``N^e`` over the overlap."""
+    if overlap <= 0.0:
+        return 0.0
+    if normal_model == NORMAL_LINEAR:
+        return 0.5 * kn * overlap * overlap
+    # substitution s = overlap u² makes the integrand smooth: Gauss-Legendre is exact to rounding
+    total = 0.0
+    for k in range(8):
+        u = _GL_NODES[k]
+        total += _GL_WEIGHTS[k] * normal_elastic(normal_model, kn, overlap * u * u, ri, rj, is_wall) * 2.0 * u
+    return total * overlap
+
+
+@njit(**JIT)
+def cohesion_force(f0, d0, gap):
+    """Attraction ``N^a <= 0`` (Gilabert Eqs. 4-5): ``-F0`` in contact, linear to zero at ``gap = D0``."""
+    if f0 == 0.0 or gap > d0:
+        return 0.0
+    if gap <= 0.0:
+        return -f0
+    return -f0 * (1.0 - gap / d0)
+
+
+@njit(**JIT)
+def cohesion_potential(f0, d0, gap):
+    """Potential of :func:`cohesion_force` (zero beyond ``D0``, continuous at contact)."""
+    if f0 == 0.0 or gap >= d0:
+        return 0.0
+    if gap >= 0.0:
+        return -0.5 * f0 * (d0 - gap) ** 2 / d0
+    return -0.5 * f0 * d0 + f0 * gap
+
+
+@njit(**JIT)
+def root_reduced_mass(inv_mass_i, inv_mass_j):
+    """``sqrt(m_i m_j / (m_i + m_j))``; walls and fixed disks have 1/m = 0 (0 if both do).
+
+    The viscous coefficient of Gilabert Eq. 6 is
+    ``eta = zeta sqrt(4 K_n m_i m_j / (m_i + m_j)) = 2 zeta sqrt(K_n) root_reduced_mass``.
+    """
+    inv_sum = inv_mass_i + inv_mass_j
+    if inv_sum == 0.0:
+        return 0.0
+    return math.sqrt(1.0 / inv_sum)
+
+
+@njit(**JIT)
+def coulomb(kt, mu, gamma_t, ne, spring, rate):
+    """Tangential force with the Coulomb limit (quasi-rigidity Eqs. 7, 11-12; ratcheting Eq. 11).
+
+    The contact slides when its elastic force ``|K_t D_t|`` would exceed ``mu N^e``: then
+    ``F_t = ±mu N^e`` with no viscous part (quasi-rigidity: Gamma_t = 0 while sliding) and
+    ``D_t = -F_t / K_t``. Otherwise it sticks: ``F_t = -K_t D_t - Gamma_t V_t``, the viscous
+    part clipped so that ``|F_t| <= mu N^e``.
+    Returns ``(D_t, F_t, status, slip)`` where ``slip = D_t(trial) - D_t``.
+    """
+    elastic = -kt * spring
+    limit = mu * ne
+    if abs(elastic) <= limit:
+        ft = min(limit, max(-limit, elastic - gamma_t * rate))
+        return spring, ft, STATUS_STICK, 0.0
+    if elastic > 0.0:
+        new_spring = -limit / kt
+        return new_spring, limit, STATUS_SLIDE_POS, spring - new_spring
+    new_spring = limit / kt
+    return new_spring, -limit, STATUS_SLIDE_NEG, spring - new_spring
+
+
+@njit(**JIT)
+def rolling(kr, mu_r, ne, spring):
+    """Elastic-plastic rolling spring (Gilabert Eq. 10).
+
+    ``spring`` is the trial elastic relative rotation; the moment on disk i is
+    ``-K_r spring``, limited by ``mu_r N^e``. Returns ``(spring, moment_i, slip)``.
+    """
+    moment = -kr * spring
+    limit = mu_r * ne
+    if abs(moment) <= limit:
+        return spring, moment, 0.0
+    bounded = limit if moment > 0.0 else -limit
+    new_spring = -bounded / kr
+    return new_spring, bounded, spring - new_spring

@@ -1,0 +1,247 @@
+"""Neighbour search: a cell list with a Verlet skin, periodic images, and history transfer.
+
+:func:`build_table` fills a fresh contact table with every pair (i < j, any periodic
+image) and every disk-wall pair closer than the interaction range plus ``extra``
+(the cohesion range D0 plus the skin), copies the history of pairs that were
+already in the old table, and reports whether any interacting contact was lost.
+It never writes past the capacity: it returns the number of rows it needs.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from .jit import JIT
+from .laws import root_reduced_mass
+
+MAX_CELLS_PER_PARTICLE = 4
+
+
+@njit(**JIT)
+def wrap_positions(position, length, periodic, wrapped, wraps):
+    """Positions brought into the cell ``[0, L)`` along periodic axes, with the image counts."""
+    n = position.shape[0]
+    for a in range(2):
+        for i in range(n):
+            x = position[i, a]
+            if periodic[a]:
+                w = math.floor(x / length[a])
+                xw = x - w * length[a]
+                if xw >= length[a]:
+                    xw -= length[a]
+                    w += 1
+                wraps[i, a] = w
+                wrapped[i, a] = xw
+            else:
+                wraps[i, a] = 0
+                wrapped[i, a] = x
+
+
+@njit(**JIT)
+def _grid(wrapped, length, periodic, cell_size, n):
+    """Cell grid: origin, number of cells and cell width per axis (at most ~4 cells per disk)."""
+    origin = np.zeros(2)
+    cells = np.ones(2, dtype=np.int64)
+    width = np.zeros(2)
+    extent = np.zeros(2)
+    for a in range(2):
+        if periodic[a]:
+            origin[a] = 0.0
+            extent[a] = length[a]
+        else:
+            lo = wrapped[0, a]
+            hi = wrapped[0, a]
+            for i in range(n):
+                lo = min(lo, wrapped[i, a])
+                hi = max(hi, wrapped[i, a])
+            origin[a] = lo - 1e-9 * (1.0 + abs(lo))
+            extent[a] = hi - origin[a] + 1e-9 * (1.0 + abs(hi))
+        cells[a] = max(1, int(extent[a] / cell_size))
+    limit = max(16, MAX_CELLS_PER_PARTICLE * n)
+    while cells[0] * cells[1] > limit:
+        for a in range(2):
+            cells[a] = max(1, cells[a] // 2)
+    for a in range(2):
+        width[a] = extent[a] / cells[a]
+    return origin, cells, width
+
+
+@njit(**JIT)
+def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_offset, extra,
+                old, new, wrapped, wraps):
+    """Build the candidate-pair table ``new`` and carry over the history of ``old``.
+
+    Arguments: ``position (N, 2)``, ``radius (N,)``, ``inv_mass (N,)``, cell ``length (2,)``, ``periodic (2,)``
+    booleans, ``wall_normal (nw, 2)``, ``wall_offset (nw,)``, ``extra`` (D0 + skin),
+    ``old``/``new`` contact tables (``ContactArrays``), scratch ``wrapped (N, 2)`` and
+    ``wraps (N, 2)`` filled with the wrapped positions and image counts.
+
+    Returns ``(needed, lost)``: the rows needed (larger than the capacity means nothing
+    was committed) and the number of touching old contacts that found no new row.
+    A pair interacts when ``|r_ij| < r_i + r_j + extra``; a disk and a wall when the gap
+    is below ``extra``.
+    """
+    n = position.shape[0]
+    nw = wall_offset.shape[0]
+    wrap_positions(position, length, periodic, wrapped, wraps)
+    cell_size = 2.0 * radius.max() + extra
+    origin, cells, width = _grid(wrapped, length, periodic, cell_size, n)
+    ncell = cells[0] * cells[1]
+    cell_of = np.empty(n, dtype=np.int64)
+    start = np.zeros(ncell + 1, dtype=np.int64)
+    for i in range(n):
+        cx = min(cells[0] - 1, max(0, int((wrapped[i, 0] - origin[0]) / width[0])))
+        cy = min(cells[1] - 1, max(0, int((wrapped[i, 1] - origin[1]) / width[1])))
+        cell_of[i] = cy * cells[0] + cx
+        start[cell_of[i] + 1] += 1
+    for c in range(ncell):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        items[fill[cell_of[i]]] = i
+        fill[cell_of[i]] += 1
+
+    capacity = new.particle_i.shape[0]
+    count = 0
+    for i in range(n):
+        cx = cell_of[i] % cells[0]
+        cy = cell_of[i] // cells[0]
+        for oy in range(-1, 2):
+            gy = cy + oy
+            sy = 0
+            if gy < 0 or gy >= cells[1]:
+                if not periodic[1]:
+                    continue
+                sy = -1 if gy < 0 else 1
+                gy -= sy * cells[1]
+            for ox in range(-1, 2):
+                gx = cx + ox
+                sx = 0
+                if gx < 0 or gx >= cells[0]:
+                    if not periodic[0]:
+                        continue
+                    sx = -1 if gx < 0 else 1
+                    gx -= sx * cells[0]
+                c = gy * cells[0] + gx
+                for k in range(start[c], start[c + 1]):
+                    j = items[k]
+                    if j <= i:
+                        continue
+                    rx = wrapped[i, 0] - wrapped[j, 0] - sx * length[0]
+                    ry = wrapped[i, 1] - wrapped[j, 1] - sy * length[1]
+                    reach = radius[i] + radius[j] + extra
+                    if rx * rx + ry * ry < reach * reach:
+                        if count < capacity:
+                            new.particle_i[count] = i
+                            new.particle_j[count] = j
+                            new.image[count, 0] = sx
+                            new.image[count, 1] = sy
+                            new.root_reduced_mass[count] = root_reduced_mass(inv_mass[i], inv_mass[j])
+                        count += 1
+        for w in range(nw):
+            gap = wall_normal[w, 0] * wrapped[i, 0] + wall_normal[w, 1] * wrapped[i, 1] - wall_offset[w] - radius[i]
+            if gap < extra:
+                if count < capacity:
+                    new.particle_i[count] = i
+                    new.particle_j[count] = n + w
+                    new.image[count, 0] = 0
+                    new.image[count, 1] = 0
+                    new.root_reduced_mass[count] = root_reduced_mass(inv_mass[i], 0.0)
+                count += 1
+    if count > capacity:
+        return count, 0
+    new.count[0] = count
+    lost = _transfer_history(old, new, wraps, length, wall_normal, n)
+    return count, lost
+
+
+@njit(**JIT)
+def _touching(status):
+    return status == STATUS_STICK or status == STATUS_SLIDE_POS or status == STATUS_SLIDE_NEG
+
+
+@njit(**JIT)
+def _transfer_history(old, new, wraps, length, wall_normal, n):
+    """Copy each old row's history to the new row of the same pair and image.
+
+    The image of a pair changes when a disk is wrapped back into the cell:
+    ``image_new = image_old + wraps_j - wraps_i``. A wall anchor (a coordinate along the
+    wall) shifts with the wrap of its disk. Returns the number of interacting old rows
+    that found no new row. Only touching contacts count: they always lie within range, while a
+    distant cohesive row may legitimately drop out when the cohesion range was reduced.
+    """
+    old_count = old.count[0]
+    first = np.zeros(n + 1, dtype=np.int64)
+    for k in range(old_count):
+        first[old.particle_i[k] + 1] += 1
+    for i in range(n):
+        first[i + 1] += first[i]
+    matched = 0
+    active = 0
+    for k in range(old_count):
+        if _touching(old.status[k]):
+            active += 1
+    for k in range(new.count[0]):
+        i = new.particle_i[k]
+        j = new.particle_j[k]
+        if j < n:
+            ix = new.image[k, 0] - wraps[j, 0] + wraps[i, 0]
+            iy = new.image[k, 1] - wraps[j, 1] + wraps[i, 1]
+        else:
+            ix = 0
+            iy = 0
+        found = -1
+        for m in range(first[i], first[i + 1]):
+            if old.particle_j[m] == j and old.image[m, 0] == ix and old.image[m, 1] == iy:
+                found = m
+                break
+        if found < 0:
+            new.status[k] = STATUS_NONE
+            new.tangential_spring[k] = 0.0
+            new.rolling_spring[k] = 0.0
+            new.anchor_angle_i[k] = 0.0
+            new.anchor_angle_j[k] = 0.0
+            new.normal_force[k] = 0.0
+            new.tangential_force[k] = 0.0
+            new.surface_gap[k] = math.inf
+            continue
+        if _touching(old.status[found]):
+            matched += 1
+        new.status[k] = old.status[found]
+        new.tangential_spring[k] = old.tangential_spring[found]
+        new.rolling_spring[k] = old.rolling_spring[found]
+        new.anchor_angle_i[k] = old.anchor_angle_i[found]
+        anchor_j = old.anchor_angle_j[found]
+        if j >= n:
+            w = j - n
+            # t = z × n = (-n_y, n_x); the wrapped disk moved by -wraps_i · L
+            anchor_j -= -wall_normal[w, 1] * wraps[i, 0] * length[0] + wall_normal[w, 0] * wraps[i, 1] * length[1]
+        new.anchor_angle_j[k] = anchor_j
+        new.normal_force[k] = old.normal_force[found]
+        new.tangential_force[k] = old.tangential_force[found]
+        new.surface_gap[k] = old.surface_gap[found]
+    return active - matched
+
+
+@njit(**JIT)
+def copy_table(source, target):
+    """Copy the rows in use of contact table ``source`` into ``target`` (same capacity)."""
+    count = source.count[0]
+    for k in range(count):
+        target.particle_i[k] = source.particle_i[k]
+        target.particle_j[k] = source.particle_j[k]
+        target.image[k, 0] = source.image[k, 0]
+        target.image[k, 1] = source.image[k, 1]
+        target.root_reduced_mass[k] = source.root_reduced_mass[k]
+        target.tangential_spring[k] = source.tangential_spring[k]
+        target.anchor_angle_i[k] = source.anchor_angle_i[k]
+        target.anchor_angle_j[k] = source.anchor_angle_j[k]
+        target.rolling_spring[k] = source.rolling_spring[k]
+        target.status[k] = source.status[k]
+        target.normal_force[k] = source.normal_force[k]
+        target.tangential_force[k] = source.tangential_force[k]
+        target.surface_gap[k] = source.surface_gap[k]
+    target.count[0] = count

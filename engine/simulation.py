@@ -1,0 +1,479 @@
+"""The Simulation facade: state, parameters, and the order of one step.
+
+Typical use::
+
+    sim = Simulation(ParticleState(positions, radii), ContactLaw(...), walls=box_walls(...))
+    sim.run(10_000)
+    snap = sim.snapshot()
+
+See :meth:`Simulation.run` for the order of operations in a step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from .errors import DivergenceError, ParameterError
+from .kernels import integrate as k_integrate
+from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
+                             ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, energy_terms, rolling_distance)
+from .kernels.contacts import TALLY_SIZE
+from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
+                           TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA)
+from .params import ContactLaw, Integration, Load, PeriodicCell, Wall, finite
+from .state import (KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
+                    ParticleState, WallState, Workspace)
+
+NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
+TANGENTIAL_CODES = {"cundall-strack": TANGENTIAL_CS, "alpha": TANGENTIAL_ALPHA, "angle": TANGENTIAL_ANGLE}
+
+#: largest number of contacts per disk assumed by the time-step bound (2D, equal disks)
+Z_MAX = 6
+#: steps run between two checkpoints of the last good state
+CHECKPOINT_STEPS = 2000
+
+
+def law_vector(law: ContactLaw) -> np.ndarray:
+    """The float64 vector the kernels read (indices KN, KT, ... of :mod:`engine.kernels.laws`)."""
+    vector = np.zeros(LAW_SIZE)
+    vector[KN] = law.normal_stiffness
+    vector[KT] = law.tangential_stiffness
+    vector[MU] = law.friction
+    vector[ZETA] = law.damping_ratio
+    vector[GAMMA_T] = law.tangential_damping
+    vector[F0] = law.cohesion_force
+    vector[D0] = law.cohesion_range
+    vector[KR] = law.rolling_stiffness
+    vector[MU_R] = law.rolling_friction
+    return vector
+
+
+def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inertia: np.ndarray) -> float:
+    """Largest stable time step of velocity Verlet for this law and these (dynamic) disks.
+
+    A Gershgorin estimate of the highest contact frequency with at most ``Z_MAX = 6``
+    contacts per disk: ``omega_max² = 2 Z_MAX max(K_n / m, K_t (1/m + r²/I), K_r / I, F0 / (D0 m))``
+    (a tangential spring moves and turns a disk: ``1/m + r²/I = 3/m`` for a disc).
+    With damping ratio ``zeta`` (normal, or tangential ``Gamma_t / (2 sqrt(K_t m_t))`` with
+    ``m_t = 1 / (2 max(1/m + r²/I))``) the bound of an explicit damped oscillator is
+    ``2 (sqrt(1 + zeta²) - zeta) / omega_max``.
+    """
+    inv_m = float(np.max(1.0 / mass))
+    inv_i = float(np.max(1.0 / inertia))
+    inv_t = float(np.max(1.0 / mass + radius ** 2 / inertia))
+    rates = [law.normal_stiffness * inv_m, law.tangential_stiffness * inv_t, law.rolling_stiffness * inv_i]
+    if law.cohesion_range > 0:
+        rates.append(law.cohesion_force / law.cohesion_range * inv_m)
+    omega_max = math.sqrt(2.0 * Z_MAX * max(rates))
+    zeta_t = law.tangential_damping / (2.0 * math.sqrt(law.tangential_stiffness / (2.0 * inv_t)))
+    zeta = max(law.damping_ratio, zeta_t)
+    return 2.0 * (math.sqrt(1.0 + zeta * zeta) - zeta) / omega_max
+
+
+@dataclass(frozen=True)
+class EnergyBudget:
+    """Energies (stored, kinetic) and cumulative work and dissipation since the start.
+
+    Dissipation: viscous damping, sliding (``mu N^e |slip|``), rolling (``mu_r N^e |slip|``)
+    and ``opening``: the energy left in the tangential and rolling springs of contacts that
+    open, which the model forgets (ratcheting Sec. III A).
+
+    ``balance`` = kinetic + stored + gravity + dissipated - work_in is conserved by the
+    exact dynamics; its drift measures the integration error.
+    """
+
+    kinetic_translation: float
+    kinetic_rotation: float
+    normal_elastic: float
+    cohesion: float
+    tangential_elastic: float
+    rolling_elastic: float
+    gravity: float
+    wall_kinetic: float
+    dissipated_damping: float
+    dissipated_sliding: float
+    dissipated_rolling: float
+    dissipated_opening: float
+    work_walls: float
+    work_cell: float
+    work_prescribed: float
+    work_external: float
+
+    @property
+    def kinetic(self) -> float:
+        return self.kinetic_translation + self.kinetic_rotation
+
+    @property
+    def stored(self) -> float:
+        return self.normal_elastic + self.cohesion + self.tangential_elastic + self.rolling_elastic
+
+    @property
+    def dissipated(self) -> float:
+        return self.dissipated_damping + self.dissipated_sliding + self.dissipated_rolling + self.dissipated_opening
+
+    @property
+    def work_in(self) -> float:
+        return self.work_walls + self.work_cell + self.work_prescribed + self.work_external
+
+    @property
+    def balance(self) -> float:
+        return self.kinetic + self.stored + self.gravity + self.dissipated - self.work_in
+
+    def as_dict(self) -> dict:
+        values = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        for name in ("kinetic", "stored", "dissipated", "work_in", "balance"):
+            values[name] = getattr(self, name)
+        return values
+
+
+@dataclass(frozen=True)
+class ContactSnapshot:
+    """Interacting contacts (status != none): arrays of length M.
+
+    ``j >= N`` denotes wall ``j - N``. ``status`` codes are named in ``STATUS_NAMES``.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    image: np.ndarray
+    status: np.ndarray
+    normal_force: np.ndarray
+    tangential_force: np.ndarray
+    surface_gap: np.ndarray
+    tangential_spring: np.ndarray
+    rolling_spring: np.ndarray
+    rolling_distance: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.i.shape[0])
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """A copy of the state at one instant (safe to hand to another thread)."""
+
+    time: float
+    step: int
+    positions: np.ndarray
+    velocities: np.ndarray
+    angles: np.ndarray
+    omegas: np.ndarray
+    radii: np.ndarray
+    masses: np.ndarray
+    kinds: np.ndarray
+    forces: np.ndarray
+    torques: np.ndarray
+    contacts: ContactSnapshot
+    wall_names: tuple[str, ...]
+    wall_normals: np.ndarray
+    wall_offsets: np.ndarray
+    wall_forces: np.ndarray
+    cell_lengths: np.ndarray
+    periodic: tuple[bool, bool]
+    virial: np.ndarray
+    energy: EnergyBudget
+    law: ContactLaw
+    dt: float
+    extra: dict = field(default_factory=dict)
+
+
+class Simulation:
+    """A 2D DEM simulation of disks, walls and an optional periodic cell.
+
+    Arguments: ``particles`` (:class:`ParticleState`), ``law`` (:class:`ContactLaw`),
+    ``integration`` (:class:`Integration`), ``walls`` (tuple of :class:`Wall`),
+    ``cell`` (:class:`PeriodicCell` or ``None`` for open axes), ``gravity`` (gx, gy).
+    """
+
+    def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
+                 integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
+                 cell: PeriodicCell | None = None, gravity=(0.0, 0.0)):
+        if not isinstance(particles, ParticleState):
+            raise ParameterError("particles", type(particles).__name__, "a ParticleState")
+        self.particles = particles
+        self.law = law
+        self.integration = integration
+        self.cell_params = cell
+        self._check_geometry(walls, cell)
+        self.walls = WallState(tuple(walls))
+        self.cell = CellState(cell, float(particles.mass.sum()))
+        self.gravity = np.array([finite("gravity[0]", gravity[0]), finite("gravity[1]", gravity[1])])
+        self.time = 0.0
+        self.step = 0
+        self._law_vector = law_vector(law)
+        self.dt = self._choose_dt(law, integration.dt)
+        self.skin = integration.skin if integration.skin is not None else 0.2 * float(particles.radius.mean())
+        n = particles.count
+        capacity = 8 * n + 64
+        self.contacts = ContactTable(capacity)
+        self._spare = ContactTable(capacity)
+        threads = numba.config.NUMBA_NUM_THREADS
+        nw = self.walls.count
+        flags = np.zeros(k_integrate.FLAG_SIZE, dtype=np.int64)
+        flags[k_integrate.FLAG_REBUILD] = 1
+        self.workspace = Workspace(
+            force_buffer=np.zeros((threads, n, 2)), torque_buffer=np.zeros((threads, n)),
+            wall_buffer=np.zeros((threads, nw)), tally_buffer=np.zeros((threads, TALLY_SIZE)),
+            wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
+            wall_reference=np.zeros(nw), length_reference=np.zeros(2),
+            gather=np.zeros(k_integrate.GATHER_SIZE), flags=flags,
+            energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))
+        self._advance(0.0, 1)
+        self._check_initial_overlap()
+
+    # ------------------------------------------------------------------ set-up checks
+    @staticmethod
+    def _check_geometry(walls, cell):
+        for wall in walls:
+            if not isinstance(wall, Wall):
+                raise ParameterError("walls", type(wall).__name__, "Wall objects")
+            if cell is not None:
+                for axis in range(2):
+                    if cell.periodic[axis] and abs(wall.normal[axis]) > 1e-12:
+                        raise ParameterError(f"wall {wall.name!r} normal", wall.normal,
+                                             f"a normal with no component along periodic axis {'xy'[axis]}")
+        if cell is not None and "stress" in cell.control and not all(cell.periodic):
+            raise ParameterError("cell.control", cell.control, "stress control with both axes periodic")
+
+    def _choose_dt(self, law: ContactLaw, dt: float | None) -> float:
+        p = self.particles
+        dynamic = p.inv_mass > 0
+        moving = dynamic if dynamic.any() else np.ones_like(dynamic)
+        bound = stability_bound(law, p.mass[moving], p.radius[moving], p.inertia[moving])
+        if dt is None:
+            return self.integration.dt_safety * bound
+        if dt > bound and dynamic.any():
+            raise ParameterError("dt", dt, f"a time step at most the stability bound {bound:.6g} "
+                                           "(see engine.simulation.stability_bound)")
+        return float(dt)
+
+    def _check_initial_overlap(self):
+        table = self.contacts
+        n = self.particles.count
+        rows = np.flatnonzero(table.surface_gap[:table.count] < 0)
+        if rows.size == 0:
+            return
+        i = table.particle_i[rows]
+        j = table.particle_j[rows]
+        radius = self.particles.radius
+        smaller = np.where(j < n, np.minimum(radius[i], radius[np.minimum(j, n - 1)]), radius[i])
+        ratio = -table.surface_gap[rows] / smaller
+        k = int(np.argmax(ratio))
+        allowed = self.integration.initial_overlap
+        if ratio[k] <= allowed:
+            return
+        other = f"disk {j[k]}" if j[k] < n else f"wall {self.walls.names[j[k] - n]!r}"
+        raise ParameterError(f"initial overlap of disk {i[k]} and {other}", round(float(ratio[k]), 6),
+                             f"at most {allowed} of the smaller radius (Integration.initial_overlap)")
+
+    # ------------------------------------------------------------------ running
+    @property
+    def periodic(self) -> tuple[bool, bool]:
+        return self.cell.periodic
+
+    @property
+    def normal_model_code(self) -> int:
+        return NORMAL_CODES[self.law.normal_model]
+
+    @property
+    def tangential_model_code(self) -> int:
+        return TANGENTIAL_CODES[self.law.tangential_model]
+
+    def _has_loads(self) -> bool:
+        p = self.particles
+        return bool(p.external_force.any() or p.external_torque.any())
+
+    def _advance(self, dt: float, n_steps: int) -> tuple[int, int]:
+        """One call of the kernel driver, growing the contact table until it fits."""
+        while True:
+            done, code = k_integrate.advance(
+                self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), self.contacts.arrays(),
+                self._spare.arrays(), self.workspace, self._law_vector, self.normal_model_code,
+                self.tangential_model_code, self.gravity, self._has_loads(), dt, self.time, n_steps, self.skin,
+                self.integration.max_overlap, numba.get_num_threads())
+            if dt > 0:
+                self.time += done * dt
+                self.step += done
+            if code != k_integrate.CODE_OVERFLOW:
+                return done, code
+            needed = int(self.workspace.info[k_integrate.INFO_NEEDED])
+            capacity = max(needed + needed // 4, 2 * self.contacts.capacity)
+            self.contacts.grow(capacity)
+            self._spare.grow(capacity)
+            n_steps -= done
+
+    def run(self, n_steps: int) -> None:
+        """Advance ``n_steps`` steps of ``dt``.
+
+        Order of one step (velocity Verlet; kernels in :mod:`engine.kernels.integrate`):
+
+        1. if the previous step predicted the skin would be used up, rebuild the contact
+           table (cell list, periodic images, walls), carrying the history over;
+        2. half kick of disks, force-controlled walls and a stress-controlled cell with the
+           forces of the previous step; drift of walls, cell lengths (affine on positions),
+           positions and angles by ``dt``;
+        3. contact forces at the new positions (tangential springs, Coulomb limit, rolling
+           springs, cohesion, damping with half-step velocities);
+        4. gravity and applied loads; second half kick; energy tallies; divergence checks
+           (NaN, an overlap above ``max_overlap``); prediction for the rebuild test.
+
+        A diverging run raises :class:`DivergenceError` and the simulation is restored to
+        its state before the block of steps that failed (at most ``CHECKPOINT_STEPS`` earlier).
+        """
+        if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
+            raise ParameterError("n_steps", n_steps, "a whole number >= 0")
+        remaining = int(n_steps)
+        while remaining > 0:
+            block = min(remaining, CHECKPOINT_STEPS)
+            saved = self._checkpoint()
+            done, code = self._advance(self.dt, block)
+            if code != k_integrate.CODE_OK:
+                failed_step = self.step
+                reason = self._failure_reason(code)
+                self._restore(saved)
+                raise DivergenceError(reason, failed_step, self.time)
+            remaining -= done
+
+    def run_for(self, duration: float) -> None:
+        """Advance by ``duration`` (rounded to a whole number of steps)."""
+        duration = finite("duration", duration)
+        if duration < 0:
+            raise ParameterError("duration", duration, "a duration >= 0")
+        self.run(int(round(duration / self.dt)))
+
+    def _failure_reason(self, code: int) -> str:
+        info = self.workspace.info
+        if code == k_integrate.CODE_NAN:
+            return "a position or velocity became NaN or infinite"
+        if code == k_integrate.CODE_OVERLAP:
+            return (f"an overlap reached {info[k_integrate.INFO_MAX_OVERLAP]:.3g} of a radius, above "
+                    f"max_overlap = {self.integration.max_overlap} (time step too large or stiffness too low)")
+        if code == k_integrate.CODE_LOST_CONTACT:
+            return (f"{int(info[k_integrate.INFO_LOST])} touching contact(s) left the neighbour list "
+                    "at a rebuild (an internal inconsistency: please report it)")
+        return f"kernel returned code {code}"
+
+    def _checkpoint(self):
+        ws = self.workspace
+        return (self.particles.copy(), self.walls.copy(), self.cell.copy(), self.contacts.copy(),
+                {name: getattr(ws, name).copy() for name in ("reference", "wall_reference", "length_reference",
+                                                             "gather", "flags", "energy", "info")},
+                self.time, self.step)
+
+    def _restore(self, saved) -> None:
+        particles, walls, cell, contacts, arrays, self.time, self.step = saved
+        self.particles, self.walls, self.cell = particles, walls, cell
+        self.contacts = contacts
+        self._spare = ContactTable(contacts.capacity)
+        for name, value in arrays.items():
+            getattr(self.workspace, name)[...] = value
+        for buffer in (self.workspace.force_buffer, self.workspace.torque_buffer):
+            buffer[...] = 0.0
+
+    # ------------------------------------------------------------------ changing parameters
+    def set_law(self, **changes) -> ContactLaw:
+        """Change contact-law parameters between steps (validated; no recompilation).
+
+        A change that makes a user-chosen ``dt`` unstable is refused and nothing changes;
+        with an automatic ``dt`` the step is recomputed.
+        """
+        law = self.law.replace(**changes)
+        dt = self._choose_dt(law, self.integration.dt)
+        self.law, self.dt = law, dt
+        self._law_vector[:] = law_vector(law)
+        if "cohesion_range" in changes:
+            self.workspace.flags[k_integrate.FLAG_REBUILD] = 1
+        return law
+
+    def set_dt(self, dt: float | None) -> float:
+        """Set the time step (``None``: automatic); a step above the stability bound is refused."""
+        integration = self.integration.replace(dt=dt)
+        self.dt = self._choose_dt(self.law, integration.dt)
+        self.integration = integration
+        return self.dt
+
+    def set_gravity(self, gx: float, gy: float) -> None:
+        self.gravity[:] = (finite("gravity[0]", gx), finite("gravity[1]", gy))
+
+    def wall_index(self, name: str) -> int:
+        if name not in self.walls.names:
+            raise ParameterError("wall", name, "one of " + ", ".join(self.walls.names))
+        return self.walls.names.index(name)
+
+    def set_wall_load(self, name: str, load: Load) -> None:
+        """Replace the load of a force-controlled wall (time still counts from t = 0)."""
+        m = self.wall_index(name)
+        if not isinstance(load, Load):
+            raise ParameterError(f"wall {name!r} load", load, "a Load")
+        self.walls.load[m] = (load.base, load.amplitude, load.angular_frequency, load.phase)
+
+    def set_wall_velocity(self, name: str, velocity: float, tangential_velocity: float = 0.0) -> None:
+        """Prescribe the velocity of a wall in velocity mode (or only the sliding of its surface)."""
+        m = self.wall_index(name)
+        if self.walls.mode[m] == WALL_VELOCITY:
+            self.walls.velocity[m] = finite(f"wall {name!r} velocity", velocity)
+        elif velocity != 0.0:
+            raise ParameterError(f"wall {name!r} velocity", velocity, "0 unless the wall is in velocity mode")
+        self.walls.tangential_velocity[m] = finite(f"wall {name!r} tangential_velocity", tangential_velocity)
+
+    def set_motion(self, index: int, velocity, omega: float = 0.0) -> None:
+        """Prescribe the velocity and spin of a kinematic disk."""
+        if not 0 <= index < self.particles.count:
+            raise ParameterError("particle index", index, f"0 <= index < {self.particles.count}")
+        if self.particles.kind[index] != KIND_KINEMATIC:
+            raise ParameterError(f"kind of disk {index}", KIND_NAMES[self.particles.kind[index]],
+                                 "'kinematic' to prescribe its motion")
+        self.particles.velocity[index] = (finite("velocity[0]", velocity[0]), finite("velocity[1]", velocity[1]))
+        self.particles.omega[index] = finite("omega", omega)
+
+    # ------------------------------------------------------------------ reading
+    def energy(self) -> EnergyBudget:
+        terms = np.zeros(ENERGY_SIZE)
+        energy_terms(self.particles.arrays(), self.walls.arrays(), self.contacts.arrays(), self._law_vector,
+                     self.normal_model_code, self.gravity, terms)
+        tally = self.workspace.energy
+        return EnergyBudget(
+            kinetic_translation=terms[KINETIC_TRANSLATION], kinetic_rotation=terms[KINETIC_ROTATION],
+            normal_elastic=terms[NORMAL_ELASTIC], cohesion=terms[COHESION],
+            tangential_elastic=terms[TANGENTIAL_ELASTIC], rolling_elastic=terms[ROLLING_ELASTIC],
+            gravity=terms[GRAVITY], wall_kinetic=terms[WALL_KINETIC],
+            dissipated_damping=tally[k_integrate.E_DAMPING], dissipated_sliding=tally[k_integrate.E_SLIDING],
+            dissipated_rolling=tally[k_integrate.E_ROLLING], dissipated_opening=tally[k_integrate.E_OPENING],
+            work_walls=tally[k_integrate.E_WALL_WORK],
+            work_cell=tally[k_integrate.E_CELL_WORK], work_prescribed=tally[k_integrate.E_PRESCRIBED_WORK],
+            work_external=tally[k_integrate.E_EXTERNAL_WORK])
+
+    def contact_snapshot(self) -> ContactSnapshot:
+        table = self.contacts
+        count = table.count
+        roll = np.zeros(count)
+        rolling_distance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), table.arrays(), roll)
+        rows = np.flatnonzero(table.status[:count] != STATUS_NONE)
+        return ContactSnapshot(
+            i=table.particle_i[rows].astype(np.int64), j=table.particle_j[rows].astype(np.int64),
+            image=table.image[rows].astype(np.int64), status=table.status[rows].copy(),
+            normal_force=table.normal_force[rows].copy(), tangential_force=table.tangential_force[rows].copy(),
+            surface_gap=table.surface_gap[rows].copy(), tangential_spring=table.tangential_spring[rows].copy(),
+            rolling_spring=table.rolling_spring[rows].copy(), rolling_distance=roll[rows])
+
+    def snapshot(self) -> Snapshot:
+        p = self.particles
+        return Snapshot(
+            time=self.time, step=self.step, positions=p.position.copy(), velocities=p.velocity.copy(),
+            angles=p.angle.copy(), omegas=p.omega.copy(), radii=p.radius.copy(), masses=p.mass.copy(),
+            kinds=p.kind.copy(), forces=p.force.copy(), torques=p.torque.copy(),
+            contacts=self.contact_snapshot(), wall_names=tuple(self.walls.names),
+            wall_normals=self.walls.normal.copy(), wall_offsets=self.walls.offset.copy(),
+            wall_forces=self.walls.particle_force.copy(), cell_lengths=self.cell.length.copy(),
+            periodic=self.periodic, virial=self.cell.virial.copy(), energy=self.energy(), law=self.law,
+            dt=self.dt)
+
+    def status_counts(self) -> dict[str, int]:
+        """Number of contacts per status name."""
+        status = self.contacts.status[:self.contacts.count]
+        return {name: int(np.count_nonzero(status == code)) for code, name in enumerate(STATUS_NAMES) if code}
