@@ -1,0 +1,100 @@
+"""Initial configurations: radius distributions, lattices and random non-overlapping gases.
+
+Each function returns plain arrays (positions ``(N, 2)``, radii ``(N,)``) that go into
+:class:`engine.state.ParticleState`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import ParameterError
+from .kernels.packing import random_sequential_addition
+from .params import positive
+
+RADIUS_DISTRIBUTIONS = ("constant", "uniform")
+
+
+def radii(count: int, radius: float | None = None, radius_min: float | None = None,
+          radius_max: float | None = None, distribution: str = "constant", seed: int = 0) -> np.ndarray:
+    """``count`` radii: all ``radius``, or uniform in ``[radius_min, radius_max]``.
+
+    Gilabert Sec. II A (diameters uniform in [a/2, a]): ``uniform`` with
+    ``radius_min = a/4, radius_max = a/2``; ratcheting Sec. IV B 1: ``radius_max [0.7, 1]``.
+    """
+    if not isinstance(count, (int, np.integer)) or count < 1:
+        raise ParameterError("count", count, "a whole number >= 1")
+    if distribution == "constant":
+        if radius is None:
+            raise ParameterError("radius", radius, "a positive radius for the constant distribution")
+        return np.full(count, positive("radius", radius))
+    if distribution == "uniform":
+        lo = positive("radius_min", radius_min if radius_min is not None else math.nan)
+        hi = positive("radius_max", radius_max if radius_max is not None else math.nan)
+        if hi < lo:
+            raise ParameterError("radius_max", hi, f"at least radius_min = {lo}")
+        return np.random.default_rng(seed).uniform(lo, hi, count)
+    raise ParameterError("distribution", distribution, "one of " + ", ".join(RADIUS_DISTRIBUTIONS))
+
+
+def square_lattice(rows: int, columns: int, spacing: float, origin=(0.0, 0.0)) -> np.ndarray:
+    """Centres of a ``rows × columns`` square lattice (row-major from ``origin``)."""
+    _counts(rows, columns)
+    spacing = positive("spacing", spacing)
+    x, y = np.meshgrid(np.arange(columns) * spacing, np.arange(rows) * spacing, indexing="xy")
+    return np.column_stack([x.ravel() + origin[0], y.ravel() + origin[1]])
+
+
+def triangular_lattice(rows: int, columns: int, spacing: float, origin=(0.0, 0.0)) -> np.ndarray:
+    """Centres of a triangular lattice: odd rows shifted by half a spacing, rows ``spacing sqrt(3)/2`` apart."""
+    _counts(rows, columns)
+    spacing = positive("spacing", spacing)
+    positions = square_lattice(rows, columns, spacing, origin)
+    row = np.repeat(np.arange(rows), columns)
+    positions[:, 0] += 0.5 * spacing * (row % 2)
+    positions[:, 1] = origin[1] + row * spacing * math.sqrt(3.0) / 2.0
+    return positions
+
+
+def _counts(rows, columns):
+    for name, value in (("rows", rows), ("columns", columns)):
+        if not isinstance(value, (int, np.integer)) or value < 1:
+            raise ParameterError(name, value, "a whole number >= 1")
+
+
+def random_gas(radius: np.ndarray, region, periodic=(False, False), seed: int = 0,
+               max_attempts: int = 100_000) -> np.ndarray:
+    """Non-overlapping disks placed at random in ``region = (x0, x1, y0, y1)``.
+
+    Random sequential addition, largest disks first; along an open axis centres stay a
+    radius away from the edges. Returns positions in the order of ``radius``. Raises a
+    :class:`ParameterError` if the disks do not fit (random addition jams near a solid
+    fraction of 0.5; denser packings come from compression).
+    """
+    radius = np.asarray(radius, dtype=np.float64)
+    x0, x1, y0, y1 = (float(v) for v in region)
+    if not (x1 > x0 and y1 > y0):
+        raise ParameterError("region", tuple(region), "(x0, x1, y0, y1) with x1 > x0 and y1 > y0")
+    order = np.argsort(-radius, kind="stable")
+    placed_positions = np.zeros((radius.size, 2))
+    placed = random_sequential_addition(radius[order], np.array([x0, y0]), np.array([x1, y1]),
+                                        np.array(periodic, dtype=np.bool_), int(seed), int(max_attempts),
+                                        placed_positions)
+    if placed < radius.size:
+        fraction = math.pi * float(np.sum(radius ** 2)) / ((x1 - x0) * (y1 - y0))
+        raise ParameterError("solid fraction", round(fraction, 4),
+                             f"a gas that random placement can reach (placed {placed} of {radius.size} disks); "
+                             "use a lower solid fraction and compress")
+    positions = np.empty_like(placed_positions)
+    positions[order] = placed_positions
+    return positions
+
+
+def gas_count_for_fraction(solid_fraction: float, area: float, mean_square_radius: float) -> int:
+    """Number of disks of mean square radius ``<r²>`` that fill ``solid_fraction`` of ``area``."""
+    fraction = positive("solid_fraction", solid_fraction)
+    if fraction >= 1:
+        raise ParameterError("solid_fraction", fraction, "a fraction in (0, 1)")
+    return max(1, int(round(fraction * area / (math.pi * mean_square_radius))))

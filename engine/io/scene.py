@@ -1,0 +1,366 @@
+"""TOML scene files: a complete description of a simulation.
+
+A scene has the sections ``[simulation]``, ``[contact]``, ``[particles]`` (explicit
+``[[particles.disk]]`` entries and/or generated ``[[particles.lattice]]`` and
+``[[particles.gas]]`` groups), and optionally ``[box]``, ``[[walls]]`` and ``[cell]``.
+The README documents every key. A broken file raises :class:`SceneError` naming the key
+and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .. import generate
+from ..errors import ParameterError, SceneError
+from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls
+from ..simulation import Simulation
+from ..state import ParticleState
+
+SIMULATION_KEYS = {"duration", "steps", "dt", "dt_safety", "skin", "max_overlap", "initial_overlap", "gravity",
+                   "record_every", "threads"}
+CONTACT_KEYS = {"normal_stiffness", "tangential_stiffness", "friction", "damping_ratio", "tangential_damping",
+                "normal_model", "tangential_model", "cohesion_force", "cohesion_range", "rolling_stiffness",
+                "rolling_friction"}
+DISK_KEYS = {"x", "y", "r", "vx", "vy", "omega", "angle", "mass", "density", "inertia", "kind"}
+RADIUS_KEYS = {"radius", "radius_min", "radius_max", "seed"}
+GROUP_KEYS = {"density", "kind", "velocity", "velocity_spread"} | RADIUS_KEYS
+LATTICE_KEYS = {"pattern", "rows", "columns", "spacing", "origin"} | GROUP_KEYS
+GAS_KEYS = {"region", "count", "solid_fraction"} | GROUP_KEYS
+WALL_KEYS = {"name", "normal", "position", "mode", "velocity", "tangential_velocity", "mass", "load",
+             "load_per_length_of"}
+LOAD_KEYS = {"base", "amplitude", "period", "phase"}
+BOX_KEYS = {"x", "y", "wall_mass", "loads"}
+CELL_KEYS = {"lengths", "periodic", "control", "stress", "strain_rate", "mass", "max_strain_rate"}
+TOP_KEYS = {"simulation", "contact", "particles", "walls", "box", "cell", "title"}
+
+
+@dataclass
+class Scene:
+    """A parsed scene: everything needed to build a :class:`Simulation` and run it."""
+
+    particles: ParticleState
+    law: ContactLaw
+    integration: Integration
+    walls: tuple[Wall, ...] = ()
+    cell: PeriodicCell | None = None
+    gravity: tuple[float, float] = (0.0, 0.0)
+    duration: float | None = None
+    steps: int | None = None
+    record_every: int = 0
+    threads: int | None = None
+    title: str = ""
+    source: str = field(default="", repr=False)
+
+    def build(self) -> Simulation:
+        """A new simulation of this scene (each call starts from the initial state)."""
+        try:
+            return Simulation(self.particles.copy(), self.law, self.integration, self.walls, self.cell, self.gravity)
+        except ParameterError as error:
+            raise SceneError(f"scene cannot start: {error}") from error
+
+    def step_count(self, dt: float) -> int:
+        if self.steps is not None:
+            return self.steps
+        return int(round(self.duration / dt))
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the scenes shipped with GranLab (``granlab run NAME``)."""
+    folder = resources.files("engine.io") / "scenes"
+    return sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith(".toml"))
+
+
+def load_scene(path_or_name: str | Path) -> Scene:
+    """Read a scene from a TOML file, or a built-in scene by name."""
+    path = Path(path_or_name)
+    if not path.suffix and str(path_or_name) in builtin_scenes():
+        text = (resources.files("engine.io") / "scenes" / f"{path_or_name}.toml").read_text()
+        return parse_scene(text, origin=f"built-in scene {path_or_name!r}")
+    if not path.is_file():
+        raise SceneError(f"scene file {str(path)!r} does not exist (built-in scenes: {', '.join(builtin_scenes())})")
+    return parse_scene(path.read_text(), origin=str(path))
+
+
+def parse_scene(text: str, origin: str = "scene") -> Scene:
+    """Parse the text of a TOML scene."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{origin} is not valid TOML: {error}") from error
+    try:
+        return _scene(data, text)
+    except SceneError as error:
+        raise SceneError(f"{origin}: {error}") from error
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _keys(table, path: str, allowed: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise SceneError(f"[{path}] must be a table, not {type(table).__name__}")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise SceneError(f"unknown key {path}.{unknown[0]}: allowed keys are {', '.join(sorted(allowed))}")
+    return table
+
+
+def _number(table, key, path, default=None):
+    value = table.get(key, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a number")
+    return float(value)
+
+
+def _integer(table, key, path, default=None, minimum=None):
+    value = table.get(key, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
+        allowed = "a whole number" + (f" >= {minimum}" if minimum is not None else "")
+        raise SceneError(f"{path}.{key} = {value!r} is not allowed: {allowed}")
+    return value
+
+
+def _vector(table, key, path, size=2, default=None):
+    value = table.get(key, default)
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != size or \
+            any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a list of {size} numbers")
+    return tuple(float(v) for v in value)
+
+
+def _string(table, key, path, default=None):
+    value = table.get(key, default)
+    if value is not None and not isinstance(value, str):
+        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a string")
+    return value
+
+
+def _build(path: str, factory, **kwargs):
+    """Call a validated constructor, turning its ParameterError into a SceneError at ``path``."""
+    try:
+        return factory(**{k: v for k, v in kwargs.items() if v is not None})
+    except ParameterError as error:
+        raise SceneError(f"[{path}] {error}") from error
+
+
+# ---------------------------------------------------------------------------------------------- sections
+def _scene(data: dict, text: str) -> Scene:
+    _keys(data, "scene", TOP_KEYS)
+    sim = _keys(data.get("simulation", {}), "simulation", SIMULATION_KEYS)
+    contact = _keys(data.get("contact", {}), "contact", CONTACT_KEYS)
+    law = _build("contact", ContactLaw, **{key: contact[key] for key in contact})
+    integration = _build("simulation", Integration, dt=_number(sim, "dt", "simulation"),
+                         dt_safety=_number(sim, "dt_safety", "simulation"),
+                         skin=_number(sim, "skin", "simulation"),
+                         max_overlap=_number(sim, "max_overlap", "simulation"),
+                         initial_overlap=_number(sim, "initial_overlap", "simulation"))
+    duration = _number(sim, "duration", "simulation")
+    steps = _integer(sim, "steps", "simulation", minimum=0)
+    if duration is None and steps is None:
+        raise SceneError("[simulation] needs duration (simulated time) or steps (number of steps)")
+    if duration is not None and steps is not None:
+        raise SceneError("[simulation] takes duration or steps, not both")
+    if duration is not None and not (duration >= 0 and math.isfinite(duration)):
+        raise SceneError(f"simulation.duration = {duration!r} is not allowed: a finite duration >= 0")
+    gravity = _vector(sim, "gravity", "simulation", default=[0.0, 0.0])
+    cell = _cell(data["cell"]) if "cell" in data else None
+    walls = _walls(data)
+    particles = _particles(data.get("particles"), cell, data.get("box"))
+    return Scene(particles=particles, law=law, integration=integration, walls=walls, cell=cell, gravity=gravity,
+                 duration=duration, steps=steps, record_every=_integer(sim, "record_every", "simulation", 0, 0),
+                 threads=_integer(sim, "threads", "simulation", minimum=1), title=str(data.get("title", "")),
+                 source=text)
+
+
+def _load(table, path) -> Load:
+    _keys(table, path, LOAD_KEYS)
+    return _build(path, Load, base=_number(table, "base", path), amplitude=_number(table, "amplitude", path),
+                  period=_number(table, "period", path), phase=_number(table, "phase", path))
+
+
+def _walls(data) -> tuple[Wall, ...]:
+    walls = []
+    if "box" in data:
+        box = _keys(data["box"], "box", BOX_KEYS)
+        x = _vector(box, "x", "box")
+        y = _vector(box, "y", "box")
+        if x is None or y is None:
+            raise SceneError("[box] needs x = [x0, x1] and y = [y0, y1]")
+        loads_table = _keys(box.get("loads", {}), "box.loads", {"left", "right", "bottom", "top"})
+        loads = {name: _load(value, f"box.loads.{name}") for name, value in loads_table.items()}
+        walls.extend(_build("box", box_walls, x0=x[0], x1=x[1], y0=y[0], y1=y[1], loads=loads,
+                            wall_mass=_number(box, "wall_mass", "box")))
+    entries = data.get("walls", [])
+    if not isinstance(entries, list):
+        raise SceneError("walls must be an array of tables: [[walls]]")
+    for k, entry in enumerate(entries):
+        path = f"walls[{k}]"
+        _keys(entry, path, WALL_KEYS)
+        per_length = entry.get("load_per_length_of")
+        if per_length is not None and (not isinstance(per_length, list) or len(per_length) != 2
+                                       or not all(isinstance(n, str) for n in per_length)):
+            raise SceneError(f"{path}.load_per_length_of = {per_length!r} is not allowed: two wall names")
+        walls.append(_build(path, Wall, normal=_vector(entry, "normal", path), position=_number(entry, "position", path),
+                            mode=_string(entry, "mode", path), velocity=_number(entry, "velocity", path),
+                            tangential_velocity=_number(entry, "tangential_velocity", path),
+                            mass=_number(entry, "mass", path),
+                            load=_load(entry["load"], f"{path}.load") if "load" in entry else None,
+                            load_per_length_of=tuple(per_length) if per_length else None,
+                            name=_string(entry, "name", path, default=f"wall{len(walls)}")))
+    return tuple(walls)
+
+
+def _cell(table) -> PeriodicCell:
+    _keys(table, "cell", CELL_KEYS)
+    periodic = table.get("periodic")
+    if periodic is not None and (not isinstance(periodic, list) or len(periodic) != 2
+                                 or not all(isinstance(p, bool) for p in periodic)):
+        raise SceneError(f"cell.periodic = {periodic!r} is not allowed: two booleans")
+    control = table.get("control")
+    if control is not None and (not isinstance(control, list) or len(control) != 2):
+        raise SceneError(f"cell.control = {control!r} is not allowed: two of fixed, stress, strain-rate")
+    return _build("cell", PeriodicCell, lengths=_vector(table, "lengths", "cell"),
+                  periodic=tuple(periodic) if periodic else None, control=tuple(control) if control else None,
+                  stress=_vector(table, "stress", "cell"), strain_rate=_vector(table, "strain_rate", "cell"),
+                  mass=_number(table, "mass", "cell"), max_strain_rate=_number(table, "max_strain_rate", "cell"))
+
+
+def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
+    if table is None:
+        raise SceneError("[particles] is missing: list disks with [[particles.disk]] or generate them")
+    _keys(table, "particles", {"density", "disk", "lattice", "gas"})
+    default_density = _number(table, "density", "particles", 1.0)
+    columns = {name: [] for name in ("position", "radius", "velocity", "omega", "angle", "mass", "inertia", "kind")}
+
+    def add(position, radius, velocity, omega, angle, mass, inertia, kind):
+        columns["position"].append(position)
+        columns["radius"].append(radius)
+        columns["velocity"].append(velocity)
+        columns["omega"].append(omega)
+        columns["angle"].append(angle)
+        columns["mass"].append(mass)
+        columns["inertia"].append(inertia)
+        columns["kind"].append(kind)
+
+    for k, disk in enumerate(_array(table, "disk")):
+        path = f"particles.disk[{k}]"
+        _keys(disk, path, DISK_KEYS)
+        x, y, r = (_number(disk, key, path) for key in ("x", "y", "r"))
+        if x is None or y is None or r is None:
+            raise SceneError(f"{path} needs x, y and r")
+        if not r > 0:
+            raise SceneError(f"{path}.r = {r!r} is not allowed: a positive radius")
+        if "mass" in disk and "density" in disk:
+            raise SceneError(f"{path} takes mass or density, not both")
+        density = _number(disk, "density", path, default_density)
+        mass = _number(disk, "mass", path, density * math.pi * r * r)
+        inertia = _number(disk, "inertia", path, 0.5 * mass * r * r)
+        add(np.array([[x, y]]), np.array([r]), np.array([[_number(disk, "vx", path, 0.0), _number(disk, "vy", path, 0.0)]]),
+            np.array([_number(disk, "omega", path, 0.0)]), np.array([_number(disk, "angle", path, 0.0)]),
+            np.array([mass]), np.array([inertia]), [_string(disk, "kind", path, "dynamic")])
+
+    for k, group in enumerate(_array(table, "lattice")):
+        path = f"particles.lattice[{k}]"
+        _keys(group, path, LATTICE_KEYS)
+        rows = _integer(group, "rows", path, minimum=1)
+        cols = _integer(group, "columns", path, minimum=1)
+        if rows is None or cols is None:
+            raise SceneError(f"{path} needs rows and columns")
+        pattern = _string(group, "pattern", path, "square")
+        if pattern not in ("square", "triangular"):
+            raise SceneError(f"{path}.pattern = {pattern!r} is not allowed: 'square' or 'triangular'")
+        maker = generate.square_lattice if pattern == "square" else generate.triangular_lattice
+        spacing = _number(group, "spacing", path)
+        if spacing is None:
+            raise SceneError(f"{path} needs spacing (distance between neighbouring centres)")
+        positions = _build(path, maker, rows=rows, columns=cols, spacing=spacing,
+                           origin=_vector(group, "origin", path, default=[0.0, 0.0]))
+        _add_group(add, group, path, positions, default_density)
+
+    for k, group in enumerate(_array(table, "gas")):
+        path = f"particles.gas[{k}]"
+        _keys(group, path, GAS_KEYS)
+        region = _vector(group, "region", path, size=4)
+        periodic = (False, False)
+        if region is None:
+            if cell is not None:
+                region = (0.0, cell.lengths[0], 0.0, cell.lengths[1])
+                periodic = cell.periodic
+            elif isinstance(box, dict) and "x" in box and "y" in box:
+                region = (box["x"][0], box["x"][1], box["y"][0], box["y"][1])
+            else:
+                raise SceneError(f"{path} needs region = [x0, x1, y0, y1] (no [cell] or [box] to fill)")
+        count = _integer(group, "count", path, minimum=1)
+        fraction = _number(group, "solid_fraction", path)
+        if (count is None) == (fraction is None):
+            raise SceneError(f"{path} takes count or solid_fraction (one of them)")
+        if count is None:
+            sample = _radii(group, path, 1000)
+            area = (region[1] - region[0]) * (region[3] - region[2])
+            count = _build(path, generate.gas_count_for_fraction, solid_fraction=fraction, area=area,
+                           mean_square_radius=float(np.mean(sample ** 2)))
+        radius = _radii(group, path, count)
+        seed = _integer(group, "seed", path, 0)
+        positions = _build(path, generate.random_gas, radius=radius, region=region, periodic=periodic, seed=seed)
+        _add_group(add, group, path, positions, default_density, radius)
+
+    if not columns["position"]:
+        raise SceneError("[particles] holds no disks: add [[particles.disk]], [[particles.lattice]] or "
+                         "[[particles.gas]]")
+    kinds = [kind for group in columns["kind"] for kind in group]
+    try:
+        return ParticleState(np.vstack(columns["position"]), np.concatenate(columns["radius"]),
+                             velocity=np.vstack(columns["velocity"]), omega=np.concatenate(columns["omega"]),
+                             angle=np.concatenate(columns["angle"]), mass=np.concatenate(columns["mass"]),
+                             inertia=np.concatenate(columns["inertia"]), kind=kinds)
+    except ParameterError as error:
+        raise SceneError(f"[particles] {error}") from error
+
+
+def _array(table, key):
+    value = table.get(key, [])
+    if not isinstance(value, list):
+        raise SceneError(f"particles.{key} must be an array of tables: [[particles.{key}]]")
+    return value
+
+
+def _radii(group, path, count) -> np.ndarray:
+    radius = _number(group, "radius", path)
+    lo = _number(group, "radius_min", path)
+    hi = _number(group, "radius_max", path)
+    if radius is not None and (lo is not None or hi is not None):
+        raise SceneError(f"{path} takes radius, or radius_min and radius_max, not both")
+    if radius is None and (lo is None or hi is None):
+        raise SceneError(f"{path} needs radius, or radius_min and radius_max (uniform distribution)")
+    distribution = "constant" if radius is not None else "uniform"
+    return _build(path, generate.radii, count=count, radius=radius, radius_min=lo, radius_max=hi,
+                  distribution=distribution, seed=_integer(group, "seed", path, 0))
+
+
+def _add_group(add, group, path, positions, default_density, radius=None):
+    n = positions.shape[0]
+    if radius is None:
+        radius = _radii(group, path, n)
+    density = _number(group, "density", path, default_density)
+    if not density > 0:
+        raise SceneError(f"{path}.density = {density!r} is not allowed: a positive areal density")
+    mass = density * math.pi * radius ** 2
+    velocity = np.tile(_vector(group, "velocity", path, default=[0.0, 0.0]), (n, 1))
+    spread = _number(group, "velocity_spread", path, 0.0)
+    if spread < 0:
+        raise SceneError(f"{path}.velocity_spread = {spread!r} is not allowed: a standard deviation >= 0")
+    if spread > 0:
+        velocity += np.random.default_rng(_integer(group, "seed", path, 0) + 1).normal(0.0, spread, (n, 2))
+    add(positions, radius, velocity, np.zeros(n), np.zeros(n), mass, 0.5 * mass * radius ** 2,
+        [_string(group, "kind", path, "dynamic")] * n)
