@@ -1,0 +1,85 @@
+"""The granlab command: JSON outputs and clear errors."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+
+def granlab(*args, check=True):
+    process = subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True,
+                             timeout=600)
+    if check and process.returncode != 0:
+        raise AssertionError(process.stderr)
+    return process
+
+
+def test_run_json_reports_final_state_in_input_order_and_energy(tmp_path):
+    scene = tmp_path / "pair.toml"
+    scene.write_text("""
+[simulation]
+duration = 3.0
+dt = 1e-4
+[contact]
+normal_stiffness = 1e4
+tangential_stiffness = 1e4
+[[particles.disk]]
+x = 0.0
+y = 0.0
+r = 0.5
+vx = 1.0
+[[particles.disk]]
+x = 2.0
+y = 0.0
+r = 0.5
+mass = 3.0
+""")
+    result = json.loads(granlab("run", str(scene), "--json").stdout)
+    positions = np.array(result["positions"])
+    assert positions.shape == (2, 2)
+    assert len(result["velocities"]) == 2 and len(result["omegas"]) == 2
+    # an elastic collision of masses pi/4 and 3: momentum and energy are conserved
+    m = [np.pi * 0.25, 3.0]
+    v = np.array(result["velocities"])[:, 0]
+    assert m[0] * v[0] + m[1] * v[1] == pytest.approx(m[0] * 1.0, rel=1e-9)
+    assert result["energy"]["kinetic"] == pytest.approx(0.5 * m[0], rel=1e-4)
+    assert v[1] == pytest.approx(2 * m[0] / (m[0] + m[1]), rel=1e-4)
+    assert result["steps"] == 30000
+
+
+def test_run_builtin_scene_summary():
+    process = granlab("run", "elastic-gas")
+    assert "200 disks" in process.stdout and "energy balance" in process.stdout
+
+
+def test_experiment_json_keys():
+    collision = json.loads(granlab("experiment", "collision", "--zeta", "0.4", "--json").stdout)
+    assert {"restitution", "restitution_predicted"} <= set(collision)
+    closed = json.loads(granlab("experiment", "closed-path", "--model", "angle", "--json").stdout)
+    assert {"delta_Dt", "predicted_delta_Dt", "enclosed_area"} <= set(closed)
+    assert closed["delta_Dt"] == 0.0
+    block = json.loads(granlab("experiment", "block", "--mu", "0.3", "--json").stdout)
+    assert {"max_Ft_over_muFn", "friction_work_positive"} <= set(block)
+    assert block["friction_work_positive"] is False
+
+
+def test_bench_json_keys_on_a_small_system():
+    result = json.loads(granlab("bench", "--side", "10", "--steps", "50", "--json").stdout)
+    assert result["particle_steps_per_s_1thread"] > 0 and result["particle_steps_per_s_all"] > 0
+    assert result["contacts_per_disk"] == pytest.approx(2.0)
+
+
+def test_errors_exit_with_status_2_and_name_the_problem(tmp_path):
+    missing = granlab("run", str(tmp_path / "none.toml"), check=False)
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[simulation]\nsteps = 1\n[contact]\ndamping_ratio = 1.5\n[[particles.disk]]\nx=0\ny=0\nr=1\n")
+    process = granlab("run", str(broken), check=False)
+    assert process.returncode == 2
+    assert "damping_ratio = 1.5 is not allowed: a fraction of critical damping in [0, 1)" in process.stderr
+    bad_zeta = granlab("experiment", "collision", "--zeta", "1.2", check=False)
+    assert bad_zeta.returncode == 2 and "damping_ratio = 1.2" in bad_zeta.stderr
+    bad_mu = granlab("experiment", "block", "--mu", "inf", check=False)
+    assert bad_mu.returncode == 2 and "mu = inf is not allowed" in bad_mu.stderr

@@ -1,0 +1,127 @@
+"""Bad input gets a clear error naming the parameter, the value and what is allowed; nothing is lost."""
+
+import math
+
+import numpy as np
+import pytest
+
+from engine import (ContactLaw, DivergenceError, Integration, ParameterError, ParticleState, SceneError,
+                    Simulation, box_walls)
+from engine.io.scene import parse_scene
+
+
+@pytest.mark.parametrize("field,value,allowed", [
+    ("normal_stiffness", 0.0, "positive"),
+    ("normal_stiffness", -5.0, "positive"),
+    ("tangential_stiffness", -1.0, "positive"),
+    ("friction", -0.1, ">= 0 or inf"),
+    ("damping_ratio", 1.0, "[0, 1)"),
+    ("damping_ratio", -0.2, ">= 0"),
+    ("friction", math.nan, "not NaN"),
+    ("normal_stiffness", math.inf, "finite"),
+    ("tangential_model", "hertz", "'cundall-strack', 'alpha', 'angle'"),
+    ("normal_model", "cubic", "'linear', 'area'"),
+    ("cohesion_force", -1.0, ">= 0"),
+    ("rolling_friction", -0.01, ">= 0"),
+])
+def test_invalid_contact_law_names_parameter_value_and_allowed(field, value, allowed):
+    with pytest.raises(ParameterError) as error:
+        ContactLaw(**{field: value})
+    message = str(error.value)
+    assert message.startswith(f"{field} = ")
+    assert allowed in message
+    assert error.value.name == field
+
+
+def test_invalid_radius_and_positions():
+    with pytest.raises(ParameterError, match=r"radius\[1\] = 0.0 is not allowed: a positive radius"):
+        ParticleState([[0, 0], [3, 0]], [1.0, 0.0])
+    with pytest.raises(ParameterError, match=r"position\[1\] = \[nan, 0.0\] is not allowed: finite numbers"):
+        ParticleState([[0, 0], [math.nan, 0]], [1.0, 1.0])
+    with pytest.raises(ParameterError, match=r"kind\[0\] = 'frozen'.*dynamic, fixed, kinematic"):
+        ParticleState([[0, 0]], [1.0], kind=["frozen"])
+
+
+def test_overlapping_initial_disks_beyond_tolerance_are_refused():
+    particles = ParticleState([[0, 0], [1.7, 0]], [1.0, 1.0])
+    with pytest.raises(ParameterError) as error:
+        Simulation(particles, ContactLaw())
+    assert "initial overlap of disk 0 and disk 1 = 0.3" in str(error.value)
+    assert "at most 0.1 of the smaller radius" in str(error.value)
+    Simulation(ParticleState([[0, 0], [1.95, 0]], [1.0, 1.0]), ContactLaw())
+
+
+def test_time_step_above_stability_bound_is_refused():
+    particles = ParticleState([[0, 0], [3, 0]], [1.0, 1.0], mass=[1.0, 1.0])
+    with pytest.raises(ParameterError, match=r"dt = 1.0 is not allowed: a time step at most the stability bound"):
+        Simulation(particles, ContactLaw(normal_stiffness=1e4), Integration(dt=1.0))
+
+
+def test_runtime_changes_are_validated_and_lose_nothing():
+    particles = ParticleState([[0, 0], [3, 0]], [1.0, 1.0], mass=[1.0, 1.0])
+    sim = Simulation(particles, ContactLaw(normal_stiffness=1e3), Integration(dt=0.002))
+    law = sim.law
+    with pytest.raises(ParameterError, match="friction = -1"):
+        sim.set_law(friction=-1.0)
+    with pytest.raises(ParameterError, match="dt = 0.002 is not allowed"):
+        sim.set_law(normal_stiffness=1e7)
+    with pytest.raises(ParameterError, match="spring = 3"):
+        sim.set_law(spring=3)
+    assert sim.law is law and sim.dt == 0.002
+    sim.set_law(friction=0.2, tangential_model="angle")
+    assert sim.law.friction == 0.2 and sim.law.tangential_model == "angle"
+
+
+def _dense_box():
+    x, y = np.meshgrid(np.arange(5) * 1.0 + 0.5, np.arange(5) * 1.0 + 0.5)
+    particles = ParticleState(np.column_stack([x.ravel(), y.ravel()]), 0.49, mass=np.ones(25))
+    return Simulation(particles, ContactLaw(normal_stiffness=100.0, damping_ratio=0.3),
+                      walls=box_walls(0, 5, 0, 5), gravity=(0.0, -1.0))
+
+
+def test_overlap_divergence_stops_and_keeps_last_good_state():
+    sim = _dense_box()
+    sim.run(200)
+    good = sim.particles.position.copy()
+    good_time = sim.time
+    sim.set_gravity(0.0, -1e5)
+    with pytest.raises(DivergenceError, match=r"an overlap reached .* of a radius, above max_overlap = 0.5"):
+        sim.run(5000)
+    assert sim.time == good_time
+    np.testing.assert_array_equal(sim.particles.position, good)
+    sim.set_gravity(0.0, -1.0)
+    sim.run(100)
+    assert sim.time > good_time
+
+
+def test_nan_divergence_stops_and_keeps_last_good_state():
+    sim = _dense_box()
+    sim.run(100)
+    good = sim.particles.velocity.copy()
+    sim.set_gravity(0.0, -1e308)
+    with pytest.raises(DivergenceError, match="NaN or infinite"):
+        sim.run(50)
+    np.testing.assert_array_equal(sim.particles.velocity, good)
+    sim.set_gravity(0.0, -1.0)
+    assert np.isfinite(sim.energy().balance)
+    sim.run(50)
+
+
+def test_scene_errors_name_the_key_and_what_is_allowed():
+    base = "[simulation]\nsteps = 10\n[[particles.disk]]\nx = 0\ny = 0\nr = 1\n"
+    cases = {
+        base + "[contact]\nfrction = 0.3\n": "unknown key contact.frction: allowed keys are cohesion_force",
+        base + "[contact]\nfriction = -0.3\n": "[contact] friction = -0.3 is not allowed: a number >= 0 or inf",
+        base + "[contact]\ntangential_model = 'spring'\n": "tangential_model = 'spring' is not allowed: one of",
+        base.replace("steps = 10", "steps = -3"): "simulation.steps = -3 is not allowed: a whole number >= 0",
+        base.replace("r = 1", "r = 'big'"): "particles.disk[0].r = 'big' is not allowed: a number",
+        base + "[box]\nx = [0, 1]\n": "[box] needs x = [x0, x1] and y = [y0, y1]",
+        "[simulation]\nsteps = 1\n": "[particles] is missing",
+        base + "friction = = 1\n": "not valid TOML",
+        base + "[cell]\nlengths = [10, 10]\ncontrol = ['stress', 'squeeze']\n": "cell.control[1] = 'squeeze'",
+    }
+    for text, expected in cases.items():
+        with pytest.raises(SceneError) as error:
+            parse_scene(text, origin="test.toml")
+        assert expected in str(error.value), str(error.value)
+        assert str(error.value).startswith("test.toml")

@@ -1,0 +1,57 @@
+"""Teaching experiments against the formulas they illustrate."""
+
+import math
+
+import pytest
+
+from engine.protocols import teaching
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.3, 0.7])
+def test_collision_restitution_and_duration_match_spring_dashpot(zeta):
+    result = teaching.collision(zeta=zeta, steps_per_collision=400)
+    assert result.restitution == pytest.approx(math.exp(-math.pi * zeta / math.sqrt(1 - zeta ** 2)), abs=5e-3)
+    assert result.restitution == pytest.approx(result.restitution_predicted, abs=5e-3)
+    assert result.contact_duration == pytest.approx(result.contact_duration_predicted, abs=2 * result.dt)
+
+
+def test_collision_restitution_error_shrinks_with_the_time_step():
+    # first order in dt: the viscous force lags by half a step and jumps to zero when the contact opens
+    coarse = teaching.collision(zeta=0.5, steps_per_collision=50)
+    fine = teaching.collision(zeta=0.5, steps_per_collision=1600)
+    assert abs(coarse.restitution - coarse.restitution_predicted) > 5e-3
+    assert abs(fine.restitution - fine.restitution_predicted) < 2e-4
+
+
+def test_collision_with_friction_and_tangential_models_is_head_on():
+    for model in ("cundall-strack", "alpha", "angle"):
+        result = teaching.collision(model=model, zeta=0.2, mu=0.5)
+        assert result.restitution == pytest.approx(result.restitution_predicted, abs=1e-2)
+
+
+def test_block_obeys_the_principle_of_minimum_sliding():
+    result = teaching.block(mu=0.5)
+    assert result.max_Ft_over_muFn <= 1.0 + 1e-12
+    assert result.slid and result.stuck_again
+    # it slides only once the load exceeds mu F_n, and stops only after the load fell below it
+    # (the elastic part reaches mu F_n a little after the load does: the viscous part carries the rest)
+    assert result.slide_start_load_ratio == pytest.approx(1.0, abs=1e-2)
+    assert result.slide_end_load_ratio < 1.0
+    assert result.sliding_while_load_below_limit_and_at_rest == 0
+    assert not result.friction_work_positive
+    assert all(work < 0 for work in result.friction_work_per_slide)
+    assert len(result.path) == len(result.load) == len(result.sliding)
+
+
+def test_block_that_is_never_pushed_past_the_cone_never_slides():
+    result = teaching.block(mu=0.5, peak_ratio=0.9)
+    assert not result.slid
+    assert result.max_Ft_over_muFn < 0.91
+    assert abs(result.slip_distance) < 1e-3
+
+
+def test_closed_path_result_reports_the_paper_quantities():
+    result = teaching.closed_path(model="cundall-strack").as_dict()
+    for key in ("delta_Dt", "predicted_delta_Dt", "enclosed_area"):
+        assert isinstance(result[key], float)
+    assert result["enclosed_area"] > 0
