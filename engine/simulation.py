@@ -217,8 +217,8 @@ class Simulation:
         flags = np.zeros(k_integrate.FLAG_SIZE, dtype=np.int64)
         flags[k_integrate.FLAG_REBUILD] = 1
         self.workspace = Workspace(
-            force_buffer=np.zeros((threads, n, 2)), torque_buffer=np.zeros((threads, n)),
-            wall_buffer=np.zeros((threads, nw)), tally_buffer=np.zeros((threads, TALLY_SIZE)),
+            force_buffer=np.zeros((threads, n, 3)), wall_buffer=np.zeros((threads, nw)),
+            tally_buffer=np.zeros((threads, TALLY_SIZE)), virial_correction=np.zeros((2, 2)),
             wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
             wall_reference=np.zeros(nw), length_reference=np.zeros(2),
             gather=np.zeros(k_integrate.GATHER_SIZE), flags=flags,
@@ -372,8 +372,7 @@ class Simulation:
         self._spare = ContactTable(contacts.capacity)
         for name, value in arrays.items():
             getattr(self.workspace, name)[...] = value
-        for buffer in (self.workspace.force_buffer, self.workspace.torque_buffer):
-            buffer[...] = 0.0
+        self.workspace.force_buffer[...] = 0.0
 
     # ------------------------------------------------------------------ changing parameters
     def set_law(self, **changes) -> ContactLaw:

@@ -53,7 +53,7 @@ ContactArrays = namedtuple(
 
 Workspace = namedtuple(
     "Workspace",
-    "force_buffer torque_buffer wall_buffer tally_buffer wrapped wraps reference wall_reference "
+    "force_buffer wall_buffer tally_buffer virial_correction wrapped wraps reference wall_reference "
     "length_reference gather flags energy info",
 )
 
@@ -274,7 +274,7 @@ class ContactTable(_Copyable):
     """Fixed-capacity contact table (one row per candidate pair of the neighbour list).
 
     Rows ``[0, count)`` are in use, sorted by ``particle_i``. ``particle_j >= N`` denotes
-    wall ``particle_j - N``. ``image (C, 2) int32`` is the periodic image of j
+    wall ``particle_j - N``. ``image (C, 2) int8`` is the periodic image of j
     (``r_ij = x_i - x_j - image · L``); ``root_reduced_mass`` is ``sqrt(m_i m_j / (m_i + m_j))``
     (``sqrt(m_i)`` against a wall, 0 between two non-dynamic bodies). History per row: ``tangential_spring`` (D_t),
     ``anchor_angle_i``/``anchor_angle_j`` (body-frame angles of the material points of
@@ -294,7 +294,7 @@ class ContactTable(_Copyable):
         self.count_array = np.zeros(1, dtype=np.int64)
         for name, dtype in self.FIELDS:
             setattr(self, name, np.zeros(self.capacity, dtype=dtype))
-        self.image = np.zeros((self.capacity, 2), dtype=np.int32)
+        self.image = np.zeros((self.capacity, 2), dtype=np.int8)
 
     @property
     def count(self) -> int:

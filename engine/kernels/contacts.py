@@ -1,7 +1,10 @@
 """The one generic contact loop: geometry of each row of the contact table, then the laws.
 
-Forces are accumulated per chunk of rows into private buffers (no write races
-between threads); :func:`engine.kernels.integrate.gather_and_kick` sums them.
+Forces and torques are accumulated per chunk of rows into private buffers (no write
+races between threads); :func:`engine.kernels.integrate.particle_pass` sums them. The
+virial ``sum_c f_c ⊗ r_c`` is ``sum_i F_i ⊗ x_i`` over disks (summed by the particle
+pass) minus the terms this loop adds for the rare rows where that differs: contacts
+with walls and through periodic images.
 
 Per row, with ``r = x_i - x_j - image · L`` (for a wall: the distance to the wall
 along its normal), ``n = r/|r|``, ``t = z × n``:
@@ -55,16 +58,18 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
 
 
 @njit(**PARALLEL)
-def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, n_chunks,
-                   force_buffer, torque_buffer, wall_buffer, tally_buffer):
+def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, n_chunks,
+                   force_buffer, wall_buffer, tally_buffer):
     """Contact forces of every row of ``ct``, accumulated into chunk buffers.
 
     Counts the contacts whose overlap exceeds ``overlap_limit`` times the smaller radius
     (``TALLY_OVERLAPPING``) and the largest such ratio (``TALLY_MAX_OVERLAP``).
 
-    ``force_buffer (T, N, 2)``, ``torque_buffer (T, N)`` must be zero on entry (the
-    gather step zeroes them); ``wall_buffer (T, nw)`` and ``tally_buffer (T, TALLY_SIZE)``
-    are overwritten. Updates the history and results of each row in place.
+    ``force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
+    (the particle pass zeroes it); ``wall_buffer (T, nw)`` and ``tally_buffer (T, TALLY_SIZE)``
+    are overwritten. The ``TALLY_V..`` slots get the virial corrections of wall and image rows.
+    History (springs, anchors, status) is updated every call; the results ``normal_force``,
+    ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run). Updates the history and results of each row in place.
     """
     position = p.position
     velocity = p.velocity
@@ -138,7 +143,8 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
                     if status[k] != STATUS_NONE:
                         opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
                                           tangential_force, kt, kr)
-                    surface_gap[k] = math.sqrt(r2) - ri - rj
+                    if store:
+                        surface_gap[k] = math.sqrt(r2) - ri - rj
                     continue
                 dist = math.sqrt(r2)
                 inv_dist = 1.0 / dist
@@ -161,7 +167,8 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
                     if status[k] != STATUS_NONE:
                         opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
                                           tangential_force, kt, kr)
-                    surface_gap[k] = gap
+                    if store:
+                        surface_gap[k] = gap
                     continue
                 rx = dist * nx
                 ry = dist * ny
@@ -176,7 +183,6 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
             ty = nx
             vn = dvx * nx + dvy * ny
             vt = dvx * tx + dvy * ty
-            surface_gap[k] = gap
             ft = 0.0
             moment = 0.0
             if gap < 0.0:
@@ -238,25 +244,34 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
                 opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
                                   kt, kr)
                 continue
-            normal_force[k] = fn
-            tangential_force[k] = ft
+            if store:
+                normal_force[k] = fn
+                tangential_force[k] = ft
+                surface_gap[k] = gap
             ft_centre = ft if tangential_model == TANGENTIAL_CS else alpha * ft
             fx = fn * nx + ft_centre * tx
             fy = fn * ny + ft_centre * ty
             force_buffer[c, i, 0] += fx
             force_buffer[c, i, 1] += fy
-            torque_buffer[c, i] += -ri * ft + moment
+            force_buffer[c, i, 2] += -ri * ft + moment
             if is_wall:
                 wall_buffer[c, j - n] -= fx * nx + fy * ny
                 wall_work += (fx * wall_vx + fy * wall_vy) * dt
+                vxx -= fx * position[i, 0]
+                vxy -= fx * position[i, 1]
+                vyx -= fy * position[i, 0]
+                vyy -= fy * position[i, 1]
             else:
                 force_buffer[c, j, 0] -= fx
                 force_buffer[c, j, 1] -= fy
-                torque_buffer[c, j] += -rj * ft - moment
-                vxx += fx * rx
-                vxy += fx * ry
-                vyx += fy * rx
-                vyy += fy * ry
+                force_buffer[c, j, 2] += -rj * ft - moment
+                if image[k, 0] != 0 or image[k, 1] != 0:
+                    sx = image[k, 0] * length_x
+                    sy = image[k, 1] * length_y
+                    vxx -= fx * sx
+                    vxy -= fx * sy
+                    vyx -= fy * sx
+                    vyy -= fy * sy
         tally_buffer[c, TALLY_DAMPING] = damping
         tally_buffer[c, TALLY_SLIDING] = sliding
         tally_buffer[c, TALLY_ROLLING] = rolling_loss

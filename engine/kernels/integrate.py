@@ -38,7 +38,8 @@ ENERGY_TALLY_SIZE = 8
 
 # results of a particle pass
 G_KINETIC_X, G_KINETIC_Y, G_PRESCRIBED, G_EXTERNAL, G_DISPLACEMENT, G_BAD = range(6)
-GATHER_SIZE = 6
+G_VXX, G_VXY, G_VYX, G_VYY = 6, 7, 8, 9
+GATHER_SIZE = 10
 
 # flags
 FLAG_REBUILD, FLAG_PHASE = 0, 1
@@ -51,19 +52,23 @@ INFO_SIZE = 5
 
 
 @njit(**PARALLEL)
-def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, gather, half, kick, drift,
-                  scale_x, scale_y, reference, out):
+def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
+                  reference, out):
     """One pass over the disks: gather forces, kick, drift.
 
-    - ``gather``: sum the chunk buffers into ``force``/``torque`` (zeroing the buffers),
-      add gravity and, if ``has_loads``, the applied loads; tally, with the whole-step
-      velocity ``v + half f/m``, the kinetic stress ``sum m v_a²``, the work of prescribed
-      motions and of applied loads over ``2 half``;
-    - kick ``v += kick f/m``, ``w += kick tau/I`` (dynamic disks only);
+    - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque;
+      tally their virial ``sum F_i ⊗ x_i``; add gravity and, if ``has_loads``, the applied
+      loads; tally, with the whole-step velocity ``v + half f/m``, the kinetic stress
+      ``sum m v_a²`` and the work of prescribed motions and of loads over ``2 half``;
+      ``store``: keep the totals in ``force``/``torque`` (else they stay those of the last
+      store: a call of :func:`advance` stores on its last pass only);
+    - kick ``v += kick f/m``, ``w += kick tau/I`` (dynamic disks only; without ``gather``
+      with the stored forces);
     - drift ``x = x scale + drift v``, ``theta += drift w`` (every disk).
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
-    distance of a disk from its neighbour-list ``reference``, the number of non-finite disks.
+    distance of a disk from its neighbour-list ``reference``, the number of non-finite disks,
+    and the virial sums.
     """
     position = p.position
     velocity = p.velocity
@@ -84,12 +89,15 @@ def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, 
     prescribed = 0.0
     external = 0.0
     displacement = 0.0
+    vxx = 0.0
+    vxy = 0.0
+    vyx = 0.0
+    vyy = 0.0
     bad = 0
     n = uint64(position.shape[0])
     for i in prange(n):
-        fx = force[i, 0]
-        fy = force[i, 1]
-        tq = torque[i]
+        x = position[i, 0]
+        y = position[i, 1]
         vx = velocity[i, 0]
         vy = velocity[i, 1]
         w = omega[i]
@@ -101,10 +109,14 @@ def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, 
             for c in range(n_chunks):
                 fx += force_buffer[c, i, 0]
                 fy += force_buffer[c, i, 1]
-                tq += torque_buffer[c, i]
+                tq += force_buffer[c, i, 2]
                 force_buffer[c, i, 0] = 0.0
                 force_buffer[c, i, 1] = 0.0
-                torque_buffer[c, i] = 0.0
+                force_buffer[c, i, 2] = 0.0
+            vxx += fx * x
+            vxy += fx * y
+            vyx += fy * x
+            vyy += fy * y
             if im > 0.0:
                 m = mass[i]
                 fx += m * gx
@@ -124,9 +136,14 @@ def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, 
                 kinetic_y += m * vy_step * vy_step
             else:
                 prescribed -= (fx * vx + fy * vy + tq * w) * work_dt
-            force[i, 0] = fx
-            force[i, 1] = fy
-            torque[i] = tq
+            if store:
+                force[i, 0] = fx
+                force[i, 1] = fy
+                torque[i] = tq
+        else:
+            fx = force[i, 0]
+            fy = force[i, 1]
+            tq = torque[i]
         if im > 0.0:
             vx += kick * fx * im
             vy += kick * fy * im
@@ -134,8 +151,8 @@ def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, 
             velocity[i, 0] = vx
             velocity[i, 1] = vy
             omega[i] = w
-        x = position[i, 0] * scale_x + drift * vx
-        y = position[i, 1] * scale_y + drift * vy
+        x = x * scale_x + drift * vx
+        y = y * scale_y + drift * vy
         position[i, 0] = x
         position[i, 1] = y
         angle[i] += drift * w
@@ -150,6 +167,10 @@ def particle_pass(p, force_buffer, torque_buffer, n_chunks, gravity, has_loads, 
     out[G_EXTERNAL] = external
     out[G_DISPLACEMENT] = displacement
     out[G_BAD] = bad
+    out[G_VXX] = vxx
+    out[G_VXY] = vxy
+    out[G_VYX] = vyx
+    out[G_VYY] = vyy
 
 
 @njit(**JIT)
@@ -187,12 +208,10 @@ def measured_stress(cell, axis):
 @njit(**JIT)
 def cell_step(cell, kick, drift, scale):
     """Kick a stress-controlled length (d²L/dt² = L0 (sigma^M - sigma^I) / M, Gilabert Eq. 3,
-    with |dL/dt| <= max_strain_rate L0), then drift the lengths.
-
-    ``scale`` gets the affine factors of the drift; returns the work of the deformation on
-    the contacts (``-sum_a (dL_a / L_a) virial_aa``).
+    with |dL/dt| <= max_strain_rate L0), then drift the lengths; ``scale`` gets the affine
+    factors of the drift. Inside a call of :func:`advance` the measured stress is that of
+    the previous step (the forces' virial is summed by the same pass that drifts the disks).
     """
-    work = 0.0
     for a in range(2):
         scale[a] = 1.0
         if cell.control[a] == CELL_STRESS:
@@ -203,16 +222,14 @@ def cell_step(cell, kick, drift, scale):
         if cell.control[a] == CELL_STRESS or cell.control[a] == CELL_STRAIN_RATE:
             new_length = cell.length[a] + drift * cell.rate[a]
             scale[a] = new_length / cell.length[a]
-            work -= (scale[a] - 1.0) * cell.virial[a, a]
             cell.length[a] = new_length
-    return work
 
 
 @njit(**JIT)
-def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, n_chunks):
-    """Contact forces into the chunk buffers; walls' reactions, virial and energy tallies."""
-    contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, max_overlap, n_chunks,
-                   ws.force_buffer, ws.torque_buffer, ws.wall_buffer, ws.tally_buffer)
+def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks):
+    """Contact forces into the chunk buffers; walls' reactions, virial corrections, energy tallies."""
+    contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks,
+                   ws.force_buffer, ws.wall_buffer, ws.tally_buffer)
     for m in range(w.offset.shape[0]):
         total = 0.0
         for c in range(n_chunks):
@@ -224,7 +241,7 @@ def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, ma
             total = 0.0
             for c in range(n_chunks):
                 total += tallies[c, TALLY_VXX + 2 * a + b]
-            cell.virial[a, b] = total
+            ws.virial_correction[a, b] = total
     worst = 0.0
     overlapping = 0.0
     for c in range(n_chunks):
@@ -282,10 +299,16 @@ def _needs_rebuild(w, cell, ws, skin):
 
 
 @njit(**JIT)
-def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, half, kick, drift, scale):
-    particle_pass(p, ws.force_buffer, ws.torque_buffer, n_chunks, gravity, has_loads, gather, half, kick, drift,
+def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kick, drift, scale):
+    """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress, the
+    tallies the work of loads, of prescribed motions and of the cell's affine drift."""
+    particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
                   scale[0], scale[1], ws.reference, ws.gather)
     if gather:
+        for a in range(2):
+            for b in range(2):
+                cell.virial[a, b] = ws.gather[G_VXX + 2 * a + b] + ws.virial_correction[a, b]
+            ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
         cell.kinetic[0] = ws.gather[G_KINETIC_X]
         cell.kinetic[1] = ws.gather[G_KINETIC_Y]
         ws.energy[E_PRESCRIBED_WORK] += ws.gather[G_PRESCRIBED]
@@ -306,8 +329,11 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
         return 0, CODE_OK
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
         walls_step(w, time, half, dt)
-        ws.energy[E_CELL_WORK] += cell_step(cell, half, dt, scale)
-        _pass(p, cell, ws, gravity, has_loads, n_chunks, False, 0.0, half, dt, scale)
+        cell_step(cell, half, dt, scale)
+        if scale[0] != 1.0 or scale[1] != 1.0:
+            for a in range(2):
+                ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
+        _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, 0.0, half, dt, scale)
         ws.flags[FLAG_PHASE] = PHASE_DRIFTED
         if _needs_rebuild(w, cell, ws, skin):
             ws.flags[FLAG_REBUILD] = 1
@@ -316,18 +342,18 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
             code = rebuild(p, w, cell, ct, spare, ws, law, skin)
             if code != CODE_OK:
                 return step, code
-        contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, n_chunks)
-        t = time + (step + 1) * dt
         last = step + 1 == n_steps
+        contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, last, n_chunks)
+        t = time + (step + 1) * dt
         if last:
             walls_step(w, t, half, 0.0)
             cell_step(cell, half, 0.0, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, half, half, 0.0, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, True, half, half, 0.0, scale)
             ws.flags[FLAG_PHASE] = PHASE_ON_STEP
         else:
             walls_step(w, t, dt, dt)
-            ws.energy[E_CELL_WORK] += cell_step(cell, dt, dt, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, half, dt, dt, scale)
+            cell_step(cell, dt, dt, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, False, half, dt, dt, scale)
         step += 1
         if ws.gather[G_BAD] > 0:
             return step, CODE_NAN
