@@ -35,6 +35,8 @@ TANGENTIAL_CODES = {"cundall-strack": TANGENTIAL_CS, "alpha": TANGENTIAL_ALPHA, 
 Z_MAX = 6
 #: steps run between two checkpoints of the last good state
 CHECKPOINT_STEPS = 2000
+#: fewer disks than this run on one thread (a parallel launch costs more than it saves)
+PARALLEL_MIN_DISKS = 1000
 
 
 def law_vector(law: ContactLaw) -> np.ndarray:
@@ -221,7 +223,8 @@ class Simulation:
             tally_buffer=np.zeros((threads, TALLY_SIZE)), virial_correction=np.zeros((2, 2)),
             wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
             wall_reference=np.zeros(nw), length_reference=np.zeros(2),
-            gather=np.zeros(k_integrate.GATHER_SIZE), flags=flags,
+            gather=np.zeros(k_integrate.GATHER_SIZE), partial_gather=np.zeros((threads, k_integrate.GATHER_SIZE)),
+            flags=flags,
             energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))
         self._advance(0.0, 1)
         self._check_initial_overlap()
@@ -284,6 +287,11 @@ class Simulation:
     def tangential_model_code(self) -> int:
         return TANGENTIAL_CODES[self.law.tangential_model]
 
+    def threads(self) -> int:
+        """Threads a run uses: numba's thread count of the calling thread (``numba.set_num_threads``),
+        or 1 below ``PARALLEL_MIN_DISKS`` disks."""
+        return numba.get_num_threads() if self.particles.count >= PARALLEL_MIN_DISKS else 1
+
     def _has_loads(self) -> bool:
         p = self.particles
         return bool(p.external_force.any() or p.external_torque.any())
@@ -295,7 +303,7 @@ class Simulation:
                 self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), self.contacts.arrays(),
                 self._spare.arrays(), self.workspace, self._law_vector, self.normal_model_code,
                 self.tangential_model_code, self.gravity, self._has_loads(), dt, self.time, n_steps, self.skin,
-                self.integration.max_overlap, numba.get_num_threads())
+                self.integration.max_overlap, self.threads())
             if dt > 0:
                 self.time += done * dt
                 self.step += done

@@ -191,3 +191,65 @@ def test_a_contact_that_opens_forgets_its_history():
     assert sim.contacts.status[0] == STATUS_STICK
     # the new contact only knows the little tangential motion since it closed
     assert abs(sim.contacts.tangential_spring[0]) < 0.01 * abs(loaded)
+
+
+def test_rolling_distance_of_ratcheting_eq20_for_a_disk_rolling_on_a_fixed_disk():
+    # the upper disk rolls over the lower one without sliding: its contact point moves by r psi
+    # on each disk for a turn psi of the line of centres, so it turns by (r_i + r_j) psi / r_i;
+    # D_t (Eq. 19) stays 0 and the rolling distance (Eq. 20) is r psi
+    law = ContactLaw(normal_stiffness=1e5, tangential_stiffness=1e5, friction=math.inf, tangential_model="angle")
+    d = 0.999
+    particles = ParticleState([[0.0, d], [0.0, 0.0]], [0.5, 0.5], kind=["kinematic", "fixed"])
+    sim = Simulation(particles, law, Integration(dt=1e-4, initial_overlap=0.05))
+    turn, steps = 0.3, 300
+    for k in range(1, steps + 1):
+        psi = turn * k / steps
+        target = d * np.array([-math.sin(psi), math.cos(psi)])
+        velocity = (target - sim.particles.position[0]) / sim.dt
+        sim.set_motion(0, velocity, 2.0 * (turn / steps) / sim.dt)
+        sim.run(1)
+    contact = sim.contact_snapshot()
+    assert abs(contact.tangential_spring[0]) < 1e-12
+    assert abs(contact.rolling_distance[0]) == pytest.approx(0.5 * turn, rel=1e-9)
+
+
+def test_kernels_release_the_gil_and_a_busy_python_thread_does_not_stall_them():
+    import threading
+    import time
+
+    import numba
+
+    sim = periodic_gas(count=400, length=40.0)
+    sim.run(10)
+
+    def timed_run(busy):
+        done = threading.Event()
+        elapsed = []
+
+        def work():
+            numba.set_num_threads(1)  # a single-threaded run never asks for the GIL
+            start = time.perf_counter()
+            sim.run(3000)
+            elapsed.append(time.perf_counter() - start)
+            done.set()
+
+        thread = threading.Thread(target=work)
+        counter = 0
+        start = time.perf_counter()
+        thread.start()
+        if busy:
+            while not done.is_set():
+                counter += 1
+        thread.join()
+        return elapsed[0], counter / (time.perf_counter() - start)
+
+    quiet, _ = timed_run(busy=False)
+    contended, rate = timed_run(busy=True)
+    solo = 0
+    solo_start = time.perf_counter()
+    while time.perf_counter() - solo_start < 0.2:
+        solo += 1
+    # this thread kept counting at a good share of its solo rate: the kernel did not hold the GIL
+    assert rate > 0.2 * solo / 0.2
+    # and the kernel, which needs the GIL only between blocks of steps, was not starved by it
+    assert contended < 5 * quiet + 0.2

@@ -2,6 +2,9 @@
 
 Kernels take arrays (bundled in the named tuples of :mod:`engine.state`) and
 scalars only; every parameter a slider can change is a runtime argument.
-Inside a ``prange`` loop a kernel touches only local names: numba loses writes
-made through a named tuple's attribute there.
+Parallel kernels are thin ``prange`` wrappers around serial chunk functions, used only
+when more than one numba thread is asked for: a parallel launch takes the GIL, so a
+single-threaded run (the lab's engine thread, a study worker) never waits for Python.
+Inside a ``prange`` loop, write through local names or pass the named tuples on to a
+function: numba loses writes made through a named tuple's attribute in the loop body.
 """

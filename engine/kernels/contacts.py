@@ -57,20 +57,40 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
     return released
 
 
-@njit(**PARALLEL)
+@njit(**JIT)
 def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, n_chunks,
                    force_buffer, wall_buffer, tally_buffer):
-    """Contact forces of every row of ``ct``, accumulated into chunk buffers.
-
-    Counts the contacts whose overlap exceeds ``overlap_limit`` times the smaller radius
-    (``TALLY_OVERLAPPING``) and the largest such ratio (``TALLY_MAX_OVERLAP``).
+    """Contact forces of every row of ``ct``, accumulated into ``n_chunks`` chunk buffers.
 
     ``force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
     (the particle pass zeroes it); ``wall_buffer (T, nw)`` and ``tally_buffer (T, TALLY_SIZE)``
     are overwritten. The ``TALLY_V..`` slots get the virial corrections of wall and image rows.
     History (springs, anchors, status) is updated every call; the results ``normal_force``,
-    ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run). Updates the history and results of each row in place.
+    ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run).
+
+    One chunk runs here, in the calling thread; more run in parallel. (A parallel launch
+    takes the GIL: a single-threaded run never does, so a busy Python thread cannot stall it.)
     """
+    if n_chunks == 1:
+        contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, 0, 1,
+                      force_buffer, wall_buffer, tally_buffer)
+    else:
+        _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store,
+                                 n_chunks, force_buffer, wall_buffer, tally_buffer)
+
+
+@njit(**PARALLEL)
+def _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store,
+                             n_chunks, force_buffer, wall_buffer, tally_buffer):
+    for c in prange(n_chunks):
+        contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
+                      force_buffer, wall_buffer, tally_buffer)
+
+
+@njit(**JIT)
+def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
+                  force_buffer, wall_buffer, tally_buffer):
+    """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``."""
     position = p.position
     velocity = p.velocity
     angle = p.angle
@@ -110,176 +130,175 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
     eta_factor = 2.0 * law[ZETA] * math.sqrt(kn)
     nw = wall_offset.shape[0]
 
-    for c in prange(n_chunks):
-        lo = uint64(c * count // n_chunks)
-        hi = uint64((c + 1) * count // n_chunks)
-        for m in range(nw):
-            wall_buffer[c, m] = 0.0
-        damping = 0.0
-        sliding = 0.0
-        rolling_loss = 0.0
-        wall_work = 0.0
-        vxx = 0.0
-        vxy = 0.0
-        vyx = 0.0
-        vyy = 0.0
-        overlapping = 0
-        max_overlap = 0.0
-        opening = 0.0
-        for k in range(lo, hi):
-            i = uint64(particle_i[k])
-            j = uint64(particle_j[k])
-            ri = radius[i]
-            is_wall = j >= n
-            wall_vx = 0.0
-            wall_vy = 0.0
-            if not is_wall:
-                rj = radius[j]
-                rx = position[i, 0] - position[j, 0] - image[k, 0] * length_x
-                ry = position[i, 1] - position[j, 1] - image[k, 1] * length_y
-                r2 = rx * rx + ry * ry
-                reach = ri + rj + d0
-                if r2 >= reach * reach:
-                    if status[k] != STATUS_NONE:
-                        opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
-                                          tangential_force, kt, kr)
-                    if store:
-                        surface_gap[k] = math.sqrt(r2) - ri - rj
-                    continue
-                dist = math.sqrt(r2)
-                inv_dist = 1.0 / dist
-                nx = rx * inv_dist
-                ny = ry * inv_dist
-                dvx = velocity[i, 0] - velocity[j, 0] + strain_x * rx
-                dvy = velocity[i, 1] - velocity[j, 1] + strain_y * ry
-                spin_sum = ri * omega[i] + rj * omega[j]
-                relative_spin = omega[i] - omega[j]
-                alpha = (ri + rj) * inv_dist
-                gap = dist - ri - rj
-            else:
-                wall = j - n
-                rj = 0.0
-                nx = wall_normal[wall, 0]
-                ny = wall_normal[wall, 1]
-                dist = nx * position[i, 0] + ny * position[i, 1] - wall_offset[wall]
-                gap = dist - ri
-                if gap >= d0:
-                    if status[k] != STATUS_NONE:
-                        opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
-                                          tangential_force, kt, kr)
-                    if store:
-                        surface_gap[k] = gap
-                    continue
-                rx = dist * nx
-                ry = dist * ny
-                wall_vx = wall_velocity[wall] * nx - wall_tangential_velocity[wall] * ny
-                wall_vy = wall_velocity[wall] * ny + wall_tangential_velocity[wall] * nx
-                dvx = velocity[i, 0] - wall_vx
-                dvy = velocity[i, 1] - wall_vy
-                spin_sum = ri * omega[i]
-                relative_spin = omega[i]
-                alpha = 1.0
-            tx = -ny
-            ty = nx
-            vn = dvx * nx + dvy * ny
-            vt = dvx * tx + dvy * ty
-            ft = 0.0
-            moment = 0.0
-            if gap < 0.0:
-                overlap = -gap
-                limit_radius = ri if is_wall else min(ri, rj)
-                if overlap > overlap_limit * limit_radius:
-                    overlapping += 1
-                    max_overlap = max(max_overlap, overlap / limit_radius)
-                ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
-                eta = eta_factor * root_reduced_mass[k]
-                fn = ne - eta * vn - f0
-                damping += eta * vn * vn * dt
-                fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
-                if fresh:
-                    phi = math.atan2(ny, nx)
-                    anchor_i[k] = phi + math.pi - angle[i]
-                    if is_wall:
-                        anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_tangential_position[j - n]
-                    else:
-                        anchor_j[k] = phi - angle[j]
-                    tangential_spring[k] = 0.0
-                    rolling_spring[k] = 0.0
-                if tangential_model == TANGENTIAL_CS:
-                    rate = vt - spin_sum
-                else:
-                    rate = alpha * vt - spin_sum
-                if tangential_model == TANGENTIAL_ANGLE:
-                    phi = math.atan2(ny, nx)
-                    trial = ri * wrap_angle(phi + math.pi - angle[i] - anchor_i[k])
-                    if is_wall:
-                        trial += (tx * position[i, 0] + ty * position[i, 1]
-                                  - wall_tangential_position[j - n] - anchor_j[k])
-                    else:
-                        trial += rj * wrap_angle(phi - angle[j] - anchor_j[k])
-                elif fresh:
-                    trial = 0.0
-                else:
-                    trial = tangential_spring[k] + rate * dt
-                spring, ft, state, slip = coulomb(kt, mu, gamma_t, ne, trial, rate)
-                if state == STATUS_STICK:
-                    damping -= (ft + kt * spring) * rate * dt
-                else:
-                    sliding += abs(ft * slip)
-                    anchor_i[k] += 0.5 * slip / ri
-                    anchor_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
-                tangential_spring[k] = spring
-                status[k] = state
-                if kr > 0.0:
-                    roll_trial = 0.0 if fresh else rolling_spring[k] + relative_spin * dt
-                    roll, moment, roll_slip = rolling(kr, mu_r, ne, roll_trial)
-                    rolling_loss += abs(moment * roll_slip)
-                    rolling_spring[k] = roll
-            elif f0 > 0.0:
-                opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
-                                  kt, kr)
-                fn = -f0 * (1.0 - gap / d0)
-                status[k] = STATUS_COHESIVE
-            else:
-                opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
-                                  kt, kr)
+    lo = uint64(c * count // n_chunks)
+    hi = uint64((c + 1) * count // n_chunks)
+    for m in range(nw):
+        wall_buffer[c, m] = 0.0
+    damping = 0.0
+    sliding = 0.0
+    rolling_loss = 0.0
+    wall_work = 0.0
+    vxx = 0.0
+    vxy = 0.0
+    vyx = 0.0
+    vyy = 0.0
+    overlapping = 0
+    max_overlap = 0.0
+    opening = 0.0
+    for k in range(lo, hi):
+        i = uint64(particle_i[k])
+        j = uint64(particle_j[k])
+        ri = radius[i]
+        is_wall = j >= n
+        wall_vx = 0.0
+        wall_vy = 0.0
+        if not is_wall:
+            rj = radius[j]
+            rx = position[i, 0] - position[j, 0] - image[k, 0] * length_x
+            ry = position[i, 1] - position[j, 1] - image[k, 1] * length_y
+            r2 = rx * rx + ry * ry
+            reach = ri + rj + d0
+            if r2 >= reach * reach:
+                if status[k] != STATUS_NONE:
+                    opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
+                                      tangential_force, kt, kr)
+                if store:
+                    surface_gap[k] = math.sqrt(r2) - ri - rj
                 continue
-            if store:
-                normal_force[k] = fn
-                tangential_force[k] = ft
-                surface_gap[k] = gap
-            ft_centre = ft if tangential_model == TANGENTIAL_CS else alpha * ft
-            fx = fn * nx + ft_centre * tx
-            fy = fn * ny + ft_centre * ty
-            force_buffer[c, i, 0] += fx
-            force_buffer[c, i, 1] += fy
-            force_buffer[c, i, 2] += -ri * ft + moment
-            if is_wall:
-                wall_buffer[c, j - n] -= fx * nx + fy * ny
-                wall_work += (fx * wall_vx + fy * wall_vy) * dt
-                vxx -= fx * position[i, 0]
-                vxy -= fx * position[i, 1]
-                vyx -= fy * position[i, 0]
-                vyy -= fy * position[i, 1]
+            dist = math.sqrt(r2)
+            inv_dist = 1.0 / dist
+            nx = rx * inv_dist
+            ny = ry * inv_dist
+            dvx = velocity[i, 0] - velocity[j, 0] + strain_x * rx
+            dvy = velocity[i, 1] - velocity[j, 1] + strain_y * ry
+            spin_sum = ri * omega[i] + rj * omega[j]
+            relative_spin = omega[i] - omega[j]
+            alpha = (ri + rj) * inv_dist
+            gap = dist - ri - rj
+        else:
+            wall = j - n
+            rj = 0.0
+            nx = wall_normal[wall, 0]
+            ny = wall_normal[wall, 1]
+            dist = nx * position[i, 0] + ny * position[i, 1] - wall_offset[wall]
+            gap = dist - ri
+            if gap >= d0:
+                if status[k] != STATUS_NONE:
+                    opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
+                                      tangential_force, kt, kr)
+                if store:
+                    surface_gap[k] = gap
+                continue
+            rx = dist * nx
+            ry = dist * ny
+            wall_vx = wall_velocity[wall] * nx - wall_tangential_velocity[wall] * ny
+            wall_vy = wall_velocity[wall] * ny + wall_tangential_velocity[wall] * nx
+            dvx = velocity[i, 0] - wall_vx
+            dvy = velocity[i, 1] - wall_vy
+            spin_sum = ri * omega[i]
+            relative_spin = omega[i]
+            alpha = 1.0
+        tx = -ny
+        ty = nx
+        vn = dvx * nx + dvy * ny
+        vt = dvx * tx + dvy * ty
+        ft = 0.0
+        moment = 0.0
+        if gap < 0.0:
+            overlap = -gap
+            limit_radius = ri if is_wall else min(ri, rj)
+            if overlap > overlap_limit * limit_radius:
+                overlapping += 1
+                max_overlap = max(max_overlap, overlap / limit_radius)
+            ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
+            eta = eta_factor * root_reduced_mass[k]
+            fn = ne - eta * vn - f0
+            damping += eta * vn * vn * dt
+            fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
+            if fresh:
+                phi = math.atan2(ny, nx)
+                anchor_i[k] = phi + math.pi - angle[i]
+                if is_wall:
+                    anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_tangential_position[j - n]
+                else:
+                    anchor_j[k] = phi - angle[j]
+                tangential_spring[k] = 0.0
+                rolling_spring[k] = 0.0
+            if tangential_model == TANGENTIAL_CS:
+                rate = vt - spin_sum
             else:
-                force_buffer[c, j, 0] -= fx
-                force_buffer[c, j, 1] -= fy
-                force_buffer[c, j, 2] += -rj * ft - moment
-                if image[k, 0] != 0 or image[k, 1] != 0:
-                    sx = image[k, 0] * length_x
-                    sy = image[k, 1] * length_y
-                    vxx -= fx * sx
-                    vxy -= fx * sy
-                    vyx -= fy * sx
-                    vyy -= fy * sy
-        tally_buffer[c, TALLY_DAMPING] = damping
-        tally_buffer[c, TALLY_SLIDING] = sliding
-        tally_buffer[c, TALLY_ROLLING] = rolling_loss
-        tally_buffer[c, TALLY_WALL_WORK] = wall_work
-        tally_buffer[c, TALLY_VXX] = vxx
-        tally_buffer[c, TALLY_VXY] = vxy
-        tally_buffer[c, TALLY_VYX] = vyx
-        tally_buffer[c, TALLY_VYY] = vyy
-        tally_buffer[c, TALLY_OVERLAPPING] = overlapping
-        tally_buffer[c, TALLY_MAX_OVERLAP] = max_overlap
-        tally_buffer[c, TALLY_OPENING] = opening
+                rate = alpha * vt - spin_sum
+            if tangential_model == TANGENTIAL_ANGLE:
+                phi = math.atan2(ny, nx)
+                trial = ri * wrap_angle(phi + math.pi - angle[i] - anchor_i[k])
+                if is_wall:
+                    trial += (tx * position[i, 0] + ty * position[i, 1]
+                              - wall_tangential_position[j - n] - anchor_j[k])
+                else:
+                    trial += rj * wrap_angle(phi - angle[j] - anchor_j[k])
+            elif fresh:
+                trial = 0.0
+            else:
+                trial = tangential_spring[k] + rate * dt
+            spring, ft, state, slip = coulomb(kt, mu, gamma_t, ne, trial, rate)
+            if state == STATUS_STICK:
+                damping -= (ft + kt * spring) * rate * dt
+            else:
+                sliding += abs(ft * slip)
+                anchor_i[k] += 0.5 * slip / ri
+                anchor_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
+            tangential_spring[k] = spring
+            status[k] = state
+            if kr > 0.0:
+                roll_trial = 0.0 if fresh else rolling_spring[k] + relative_spin * dt
+                roll, moment, roll_slip = rolling(kr, mu_r, ne, roll_trial)
+                rolling_loss += abs(moment * roll_slip)
+                rolling_spring[k] = roll
+        elif f0 > 0.0:
+            opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
+                              kt, kr)
+            fn = -f0 * (1.0 - gap / d0)
+            status[k] = STATUS_COHESIVE
+        else:
+            opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
+                              kt, kr)
+            continue
+        if store:
+            normal_force[k] = fn
+            tangential_force[k] = ft
+            surface_gap[k] = gap
+        ft_centre = ft if tangential_model == TANGENTIAL_CS else alpha * ft
+        fx = fn * nx + ft_centre * tx
+        fy = fn * ny + ft_centre * ty
+        force_buffer[c, i, 0] += fx
+        force_buffer[c, i, 1] += fy
+        force_buffer[c, i, 2] += -ri * ft + moment
+        if is_wall:
+            wall_buffer[c, j - n] -= fx * nx + fy * ny
+            wall_work += (fx * wall_vx + fy * wall_vy) * dt
+            vxx -= fx * position[i, 0]
+            vxy -= fx * position[i, 1]
+            vyx -= fy * position[i, 0]
+            vyy -= fy * position[i, 1]
+        else:
+            force_buffer[c, j, 0] -= fx
+            force_buffer[c, j, 1] -= fy
+            force_buffer[c, j, 2] += -rj * ft - moment
+            if image[k, 0] != 0 or image[k, 1] != 0:
+                sx = image[k, 0] * length_x
+                sy = image[k, 1] * length_y
+                vxx -= fx * sx
+                vxy -= fx * sy
+                vyx -= fy * sx
+                vyy -= fy * sy
+    tally_buffer[c, TALLY_DAMPING] = damping
+    tally_buffer[c, TALLY_SLIDING] = sliding
+    tally_buffer[c, TALLY_ROLLING] = rolling_loss
+    tally_buffer[c, TALLY_WALL_WORK] = wall_work
+    tally_buffer[c, TALLY_VXX] = vxx
+    tally_buffer[c, TALLY_VXY] = vxy
+    tally_buffer[c, TALLY_VYX] = vyx
+    tally_buffer[c, TALLY_VYY] = vyy
+    tally_buffer[c, TALLY_OVERLAPPING] = overlapping
+    tally_buffer[c, TALLY_MAX_OVERLAP] = max_overlap
+    tally_buffer[c, TALLY_OPENING] = opening

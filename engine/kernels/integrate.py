@@ -51,9 +51,9 @@ INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS = rang
 INFO_SIZE = 5
 
 
-@njit(**PARALLEL)
+@njit(**JIT)
 def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
-                  reference, out):
+                  reference, partial, out):
     """One pass over the disks: gather forces, kick, drift.
 
     - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque;
@@ -68,8 +68,39 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
     distance of a disk from its neighbour-list ``reference``, the number of non-finite disks,
-    and the virial sums.
+    and the virial sums. With ``n_chunks > 1`` the disks are split among threads, each
+    filling a row of ``partial (T, GATHER_SIZE)``.
     """
+    n = p.position.shape[0]
+    if n_chunks == 1:
+        particle_range(p, force_buffer, 1, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
+                       reference, 0, n, out)
+        return
+    _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
+                              scale_x, scale_y, reference, partial)
+    for k in range(GATHER_SIZE):
+        out[k] = 0.0
+    for c in range(n_chunks):
+        for k in range(GATHER_SIZE):
+            if k == G_DISPLACEMENT:
+                out[k] = max(out[k], partial[c, k])
+            else:
+                out[k] += partial[c, k]
+
+
+@njit(**PARALLEL)
+def _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
+                              scale_x, scale_y, reference, partial):
+    n = p.position.shape[0]
+    for c in prange(n_chunks):
+        particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x,
+                       scale_y, reference, c * n // n_chunks, (c + 1) * n // n_chunks, partial[c])
+
+
+@njit(**JIT)
+def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
+                   reference, lo, hi, out):
+    """:func:`particle_pass` for disks ``[lo, hi)``."""
     position = p.position
     velocity = p.velocity
     angle = p.angle
@@ -94,8 +125,7 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
     vyx = 0.0
     vyy = 0.0
     bad = 0
-    n = uint64(position.shape[0])
-    for i in prange(n):
+    for i in range(uint64(lo), uint64(hi)):
         x = position[i, 0]
         y = position[i, 1]
         vx = velocity[i, 0]
@@ -303,7 +333,7 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kick, 
     """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress, the
     tallies the work of loads, of prescribed motions and of the cell's affine drift."""
     particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
-                  scale[0], scale[1], ws.reference, ws.gather)
+                  scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather)
     if gather:
         for a in range(2):
             for b in range(2):
