@@ -222,7 +222,7 @@ class Simulation:
             force_buffer=np.zeros((threads, n, 3)), wall_buffer=np.zeros((threads, nw)),
             tally_buffer=np.zeros((threads, TALLY_SIZE)), virial_correction=np.zeros((2, 2)),
             wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
-            wall_reference=np.zeros(nw), length_reference=np.zeros(2),
+            wall_reference=np.zeros(nw), length_reference=np.zeros(2), scale=np.ones(2),
             gather=np.zeros(k_integrate.GATHER_SIZE), partial_gather=np.zeros((threads, k_integrate.GATHER_SIZE)),
             flags=flags,
             energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))

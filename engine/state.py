@@ -54,7 +54,7 @@ ContactArrays = namedtuple(
 Workspace = namedtuple(
     "Workspace",
     "force_buffer wall_buffer tally_buffer virial_correction wrapped wraps reference wall_reference "
-    "length_reference gather partial_gather flags energy info",
+    "length_reference scale gather partial_gather flags energy info",
 )
 
 

@@ -28,7 +28,7 @@ import math
 from numba import njit, prange, uint64
 
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-from .jit import JIT, PARALLEL
+from .jit import KERNEL, PARALLEL
 from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, coulomb,
                    normal_elastic, rolling, wrap_angle)
 
@@ -39,7 +39,7 @@ TALLY_OVERLAPPING, TALLY_MAX_OVERLAP, TALLY_OPENING = 8, 9, 10
 TALLY_SIZE = 11
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force, kt, kr):
     """Row ``k`` stops interacting: its history is forgotten (ratcheting Sec. III A).
 
@@ -57,7 +57,7 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
     return released
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, n_chunks,
                    force_buffer, wall_buffer, tally_buffer):
     """Contact forces of every row of ``ct``, accumulated into ``n_chunks`` chunk buffers.
@@ -87,7 +87,7 @@ def _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model
                       force_buffer, wall_buffer, tally_buffer)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
                   force_buffer, wall_buffer, tally_buffer):
     """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``."""

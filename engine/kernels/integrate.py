@@ -25,11 +25,11 @@ from numba import njit, prange, uint64
 from ..state import CELL_NONE, CELL_STRAIN_RATE, CELL_STRESS, WALL_FIXED, WALL_FORCE
 from .contacts import (TALLY_DAMPING, TALLY_MAX_OVERLAP, TALLY_OPENING, TALLY_OVERLAPPING, TALLY_ROLLING,
                        TALLY_SLIDING, TALLY_VXX, TALLY_WALL_WORK, contact_forces)
-from .jit import JIT, PARALLEL
+from .jit import JIT, KERNEL, PARALLEL
 from .laws import D0
 from .neighbours import build_table, copy_table
 
-CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP = range(5)
+CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP, CODE_REBUILD = range(6)
 
 # energy tallies accumulated over the run (work done on the disks is positive)
 (E_DAMPING, E_SLIDING, E_ROLLING, E_OPENING, E_WALL_WORK, E_CELL_WORK, E_PRESCRIBED_WORK,
@@ -51,7 +51,7 @@ INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS = rang
 INFO_SIZE = 5
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
                   reference, partial, out):
     """One pass over the disks: gather forces, kick, drift.
@@ -97,7 +97,7 @@ def _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gat
                        scale_y, reference, c * n // n_chunks, (c + 1) * n // n_chunks, partial[c])
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
                    reference, lo, hi, out):
     """:func:`particle_pass` for disks ``[lo, hi)``."""
@@ -203,7 +203,7 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     out[G_VYY] = vyy
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def wall_load(w, m, t):
     """Applied force on wall ``m`` at time ``t``: ``sigma(t)`` times the box length it spans."""
     base = w.load[m, 0]
@@ -216,7 +216,7 @@ def wall_load(w, m, t):
     return sigma * -(w.offset[a] + w.offset[b])
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def walls_step(w, t, kick, drift):
     """Kick force-controlled walls with the load at ``t`` and the disks' push; drift moving walls."""
     for m in range(w.offset.shape[0]):
@@ -228,14 +228,14 @@ def walls_step(w, t, kick, drift):
         w.tangential_position[m] += drift * w.tangential_velocity[m]
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def measured_stress(cell, axis):
     """Gilabert's sigma^M_aa = (sum m v_a² + sum f_a r_a) / A (compression positive)."""
     area = cell.length[0] * cell.length[1]
     return (cell.kinetic[axis] + cell.virial[axis, axis]) / area
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def cell_step(cell, kick, drift, scale):
     """Kick a stress-controlled length (d²L/dt² = L0 (sigma^M - sigma^I) / M, Gilabert Eq. 3,
     with |dL/dt| <= max_strain_rate L0), then drift the lengths; ``scale`` gets the affine
@@ -255,7 +255,7 @@ def cell_step(cell, kick, drift, scale):
             cell.length[a] = new_length
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks):
     """Contact forces into the chunk buffers; walls' reactions, virial corrections, energy tallies."""
     contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks,
@@ -289,9 +289,7 @@ def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, ma
 @njit(**JIT)
 def rebuild(p, w, cell, ct, spare, ws, law, skin):
     """Rebuild the contact table into ``spare``, then commit it to ``ct``. Returns a code."""
-    periodic = np.empty(2, dtype=np.bool_)
-    for a in range(2):
-        periodic[a] = cell.control[a] != CELL_NONE
+    periodic = (cell.control[0] != CELL_NONE, cell.control[1] != CELL_NONE)
     needed, lost = build_table(p.position, p.radius, p.inv_mass, cell.length, periodic, w.normal, w.offset,
                                law[D0] + skin, ct, spare, ws.wrapped, ws.wraps)
     if needed > spare.particle_i.shape[0]:
@@ -314,7 +312,7 @@ def rebuild(p, w, cell, ct, spare, ws, law, skin):
     return CODE_OK
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def _needs_rebuild(w, cell, ws, skin):
     """Whether a pair distance may have changed by the skin since the last rebuild."""
     moved = math.sqrt(ws.gather[G_DISPLACEMENT])
@@ -328,7 +326,7 @@ def _needs_rebuild(w, cell, ws, skin):
     return moved + max(moved, wall_move) + cell_move >= skin
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kick, drift, scale):
     """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress, the
     tallies the work of loads, of prescribed motions and of the cell's affine drift."""
@@ -350,28 +348,47 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
             skin, max_overlap, n_chunks):
     """Run up to ``n_steps`` velocity-Verlet steps from ``time``; returns ``(steps_done, code)``.
 
-    ``dt = 0`` with ``n_steps = 1`` only evaluates the forces of the current state.
+    ``dt = 0`` with ``n_steps = 1`` only evaluates the forces of the current state. This
+    outer loop rebuilds the contact table (which allocates); the steps themselves run in
+    :func:`_steps`, which never allocates and so needs no reference counting.
     """
-    scale = np.ones(2)
-    half = 0.5 * dt
-    step = 0
     if n_steps == 0:
         return 0, CODE_OK
+    scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
-        walls_step(w, time, half, dt)
-        cell_step(cell, half, dt, scale)
-        if scale[0] != 1.0 or scale[1] != 1.0:
-            for a in range(2):
-                ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-        _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, 0.0, half, dt, scale)
-        ws.flags[FLAG_PHASE] = PHASE_DRIFTED
-        if _needs_rebuild(w, cell, ws, skin):
-            ws.flags[FLAG_REBUILD] = 1
+        _start(p, w, cell, ws, gravity, has_loads, dt, time, skin, n_chunks, scale)
+    step = 0
     while True:
         if ws.flags[FLAG_REBUILD]:
             code = rebuild(p, w, cell, ct, spare, ws, law, skin)
             if code != CODE_OK:
                 return step, code
+        step, code = _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time,
+                            step, n_steps, skin, max_overlap, n_chunks, scale)
+        if code != CODE_REBUILD:
+            return step, code
+
+
+@njit(**KERNEL)
+def _start(p, w, cell, ws, gravity, has_loads, dt, time, skin, n_chunks, scale):
+    """First half kick and drift of a call that starts on a whole step."""
+    half = 0.5 * dt
+    walls_step(w, time, half, dt)
+    cell_step(cell, half, dt, scale)
+    for a in range(2):
+        ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
+    _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, 0.0, half, dt, scale)
+    ws.flags[FLAG_PHASE] = PHASE_DRIFTED
+    if _needs_rebuild(w, cell, ws, skin):
+        ws.flags[FLAG_REBUILD] = 1
+
+
+@njit(**KERNEL)
+def _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time, step, n_steps,
+           skin, max_overlap, n_chunks, scale):
+    """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``)."""
+    half = 0.5 * dt
+    while True:
         last = step + 1 == n_steps
         contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, last, n_chunks)
         t = time + (step + 1) * dt
@@ -393,3 +410,4 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
             return step, CODE_OK
         if _needs_rebuild(w, cell, ws, skin):
             ws.flags[FLAG_REBUILD] = 1
+            return step, CODE_REBUILD

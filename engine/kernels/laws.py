@@ -14,7 +14,7 @@ import math
 from numba import njit
 
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-from .jit import JIT
+from .jit import KERNEL
 
 # layout of the law vector
 KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R = range(9)
@@ -32,13 +32,13 @@ _GL_WEIGHTS = (0.05061426814518813, 0.11119051722668724, 0.15685332293894363, 0.
                0.18134189168918100, 0.15685332293894363, 0.11119051722668724, 0.05061426814518813)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def wrap_angle(x):
     """``x`` brought into [-pi, pi)."""
     return x - TWO_PI * math.floor((x + math.pi) / TWO_PI)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def _x_minus_sin_x(x):
     if abs(x) < 0.2:
         x2 = x * x
@@ -46,7 +46,7 @@ def _x_minus_sin_x(x):
     return x - math.sin(x)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def segment_area(r, h):
     """Area of the circular segment of height ``h`` (0 <= h <= 2r) of a disk of radius ``r``.
 
@@ -61,7 +61,7 @@ def segment_area(r, h):
     return 0.5 * r * r * _x_minus_sin_x(2.0 * beta)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def overlap_area(overlap, ri, rj, is_wall):
     """Overlap area of disk i with disk j (or with a wall) for an overlap ``-D_n``."""
     if overlap <= 0.0:
@@ -77,7 +77,7 @@ def overlap_area(overlap, ri, rj, is_wall):
     return segment_area(ri, hi) + segment_area(rj, hj)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def normal_elastic(normal_model, kn, overlap, ri, rj, is_wall):
     """Elastic repulsion ``N^e >= 0`` for an overlap ``-D_n`` (zero when apart).
 
@@ -92,7 +92,7 @@ def normal_elastic(normal_model, kn, overlap, ri, rj, is_wall):
     return kn * overlap_area(overlap, ri, rj, is_wall) / length
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def normal_potential(normal_model, kn, overlap, ri, rj, is_wall):
     """Energy stored by the normal spring: the integral of ``N^e`` over the overlap."""
     if overlap <= 0.0:
@@ -107,7 +107,7 @@ def normal_potential(normal_model, kn, overlap, ri, rj, is_wall):
     return total * overlap
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def cohesion_force(f0, d0, gap):
     """Attraction ``N^a <= 0`` (Gilabert Eqs. 4-5): ``-F0`` in contact, linear to zero at ``gap = D0``."""
     if f0 == 0.0 or gap > d0:
@@ -117,7 +117,7 @@ def cohesion_force(f0, d0, gap):
     return -f0 * (1.0 - gap / d0)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def cohesion_potential(f0, d0, gap):
     """Potential of :func:`cohesion_force` (zero beyond ``D0``, continuous at contact)."""
     if f0 == 0.0 or gap >= d0:
@@ -127,7 +127,7 @@ def cohesion_potential(f0, d0, gap):
     return -0.5 * f0 * d0 + f0 * gap
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def root_reduced_mass(inv_mass_i, inv_mass_j):
     """``sqrt(m_i m_j / (m_i + m_j))``; walls and fixed disks have 1/m = 0 (0 if both do).
 
@@ -140,7 +140,7 @@ def root_reduced_mass(inv_mass_i, inv_mass_j):
     return math.sqrt(1.0 / inv_sum)
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def coulomb(kt, mu, gamma_t, ne, spring, rate):
     """Tangential force with the Coulomb limit (quasi-rigidity Eqs. 7, 11-12; ratcheting Eq. 11).
 
@@ -162,7 +162,7 @@ def coulomb(kt, mu, gamma_t, ne, spring, rate):
     return new_spring, -limit, STATUS_SLIDE_NEG, spring - new_spring
 
 
-@njit(**JIT)
+@njit(**KERNEL)
 def rolling(kr, mu_r, ne, spring):
     """Elastic-plastic rolling spring (Gilabert Eq. 10).
 

@@ -73,8 +73,8 @@ def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_
                 old, new, wrapped, wraps):
     """Build the candidate-pair table ``new`` and carry over the history of ``old``.
 
-    Arguments: ``position (N, 2)``, ``radius (N,)``, ``inv_mass (N,)``, cell ``length (2,)``, ``periodic (2,)``
-    booleans, ``wall_normal (nw, 2)``, ``wall_offset (nw,)``, ``extra`` (D0 + skin),
+    Arguments: ``position (N, 2)``, ``radius (N,)``, ``inv_mass (N,)``, cell ``length (2,)``, ``periodic``
+    (two booleans), ``wall_normal (nw, 2)``, ``wall_offset (nw,)``, ``extra`` (D0 + skin),
     ``old``/``new`` contact tables (``ContactArrays``), scratch ``wrapped (N, 2)`` and
     ``wraps (N, 2)`` filled with the wrapped positions and image counts.
 
