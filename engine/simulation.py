@@ -205,10 +205,11 @@ class Simulation:
         self.walls = WallState(tuple(walls))
         self.cell = CellState(cell, float(particles.mass.sum()))
         self.gravity = np.array([finite("gravity[0]", gravity[0]), finite("gravity[1]", gravity[1])])
-        self.time = 0.0
         self.step = 0
+        self._time_origin = 0.0
+        self._step_origin = 0
         self._law_vector = law_vector(law)
-        self.dt = self._choose_dt(law, integration.dt)
+        self._dt = self._choose_dt(law, integration.dt)
         self.skin = integration.skin if integration.skin is not None else 0.2 * float(particles.radius.mean())
         n = particles.count
         capacity = 8 * n + 64
@@ -223,6 +224,7 @@ class Simulation:
             tally_buffer=np.zeros((threads, TALLY_SIZE)), virial_correction=np.zeros((2, 2)),
             wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
             wall_reference=np.zeros(nw), length_reference=np.zeros(2), scale=np.ones(2),
+            lagged_virial=np.zeros((2, 2)), lagged_kinetic=np.zeros(2),
             gather=np.zeros(k_integrate.GATHER_SIZE), partial_gather=np.zeros((threads, k_integrate.GATHER_SIZE)),
             flags=flags,
             energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))
@@ -276,6 +278,23 @@ class Simulation:
 
     # ------------------------------------------------------------------ running
     @property
+    def time(self) -> float:
+        """Simulated time: ``t0 + (step - step0) dt`` since the last change of ``dt`` (computed the
+        same way by the kernels, so a run split into pieces keeps the same times)."""
+        return self._time_origin + (self.step - self._step_origin) * self._dt
+
+    @property
+    def dt(self) -> float:
+        return self._dt
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        if float(value) != self._dt:
+            self._time_origin = self.time
+            self._step_origin = self.step
+            self._dt = float(value)
+
+    @property
     def periodic(self) -> tuple[bool, bool]:
         return self.cell.periodic
 
@@ -302,10 +321,9 @@ class Simulation:
             done, code = k_integrate.advance(
                 self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), self.contacts.arrays(),
                 self._spare.arrays(), self.workspace, self._law_vector, self.normal_model_code,
-                self.tangential_model_code, self.gravity, self._has_loads(), dt, self.time, n_steps, self.skin,
-                self.integration.max_overlap, self.threads())
+                self.tangential_model_code, self.gravity, self._has_loads(), dt, self._time_origin,
+                self.step - self._step_origin, n_steps, self.skin, self.integration.max_overlap, self.threads())
             if dt > 0:
-                self.time += done * dt
                 self.step += done
             if code != k_integrate.CODE_OVERFLOW:
                 return done, code
@@ -369,12 +387,11 @@ class Simulation:
     def _checkpoint(self):
         ws = self.workspace
         return (self.particles.copy(), self.walls.copy(), self.cell.copy(), self.contacts.copy(),
-                {name: getattr(ws, name).copy() for name in ("reference", "wall_reference", "length_reference",
-                                                             "gather", "flags", "energy", "info")},
-                self.time, self.step)
+                {name: getattr(ws, name).copy() for name in self.STATE_ARRAYS["workspace"] + ("gather",)},
+                self.step, self._step_origin, self._time_origin, self._dt)
 
     def _restore(self, saved) -> None:
-        particles, walls, cell, contacts, arrays, self.time, self.step = saved
+        particles, walls, cell, contacts, arrays, self.step, self._step_origin, self._time_origin, self._dt = saved
         self.particles, self.walls, self.cell = particles, walls, cell
         self.contacts = contacts
         self._spare = ContactTable(contacts.capacity)
@@ -437,6 +454,63 @@ class Simulation:
                                  "'kinematic' to prescribe its motion")
         self.particles.velocity[index] = (finite("velocity[0]", velocity[0]), finite("velocity[1]", velocity[1]))
         self.particles.omega[index] = finite("omega", omega)
+
+    # ------------------------------------------------------------------ checkpoints
+    STATE_ARRAYS = {
+        "particles": ("position", "velocity", "angle", "omega", "radius", "mass", "inertia", "kind", "inv_mass",
+                      "inv_inertia", "force", "torque", "external_force", "external_torque"),
+        "walls": ("normal", "offset", "velocity", "tangential_velocity", "tangential_position", "mode", "inv_mass",
+                  "load", "length_ref", "particle_force"),
+        "cell": ("length", "rate", "control", "target_stress", "strain_rate", "reference_length", "mass",
+                 "max_strain_rate", "virial", "kinetic"),
+        "workspace": ("reference", "wall_reference", "length_reference", "flags", "energy", "info",
+                      "virial_correction", "lagged_virial", "lagged_kinetic"),
+    }
+
+    def export_state(self) -> dict[str, np.ndarray]:
+        """Every array the dynamics depends on, keyed ``"group/name"`` (copies), plus
+        ``step``, the time origin, ``dt`` and ``threads``: enough to continue the run bit for bit
+        (with the same number of threads) from :meth:`restore_state`."""
+        sources = {"particles": self.particles, "walls": self.walls, "cell": self.cell}
+        state = {}
+        for group, names in self.STATE_ARRAYS.items():
+            for name in names:
+                source = getattr(self.workspace, name) if group == "workspace" else getattr(sources[group], name)
+                state[f"{group}/{name}"] = np.array(source, copy=True)
+        rows = self.contacts.count
+        for name, _ in ContactTable.FIELDS:
+            state[f"contacts/{name}"] = getattr(self.contacts, name)[:rows].copy()
+        state["contacts/image"] = self.contacts.image[:rows].copy()
+        state["step"] = np.int64(self.step)
+        state["time_origin"] = np.float64(self._time_origin)
+        state["step_origin"] = np.int64(self._step_origin)
+        state["dt"] = np.float64(self._dt)
+        state["threads"] = np.int64(self.threads())
+        return state
+
+    def restore_state(self, state: dict) -> None:
+        """Overwrite this simulation's state with one from :meth:`export_state` (same disks and walls)."""
+        n = self.particles.count
+        if state["particles/position"].shape != (n, 2) or state["walls/offset"].shape != (self.walls.count,):
+            raise ParameterError("checkpoint", f"{state['particles/position'].shape[0]} disks",
+                                 f"{n} disks and {self.walls.count} walls, as this simulation")
+        sources = {"particles": self.particles, "walls": self.walls, "cell": self.cell}
+        for group, names in self.STATE_ARRAYS.items():
+            for name in names:
+                target = getattr(self.workspace, name) if group == "workspace" else getattr(sources[group], name)
+                target[...] = state[f"{group}/{name}"]
+        rows = int(state["contacts/particle_i"].shape[0])
+        if rows > self.contacts.capacity:
+            self.contacts.grow(rows + rows // 4)
+            self._spare.grow(rows + rows // 4)
+        for name, _ in ContactTable.FIELDS + (("image", None),):
+            getattr(self.contacts, name)[:rows] = state[f"contacts/{name}"]
+        self.contacts.count_array[0] = rows
+        self.workspace.force_buffer[...] = 0.0
+        self.step = int(state["step"])
+        self._time_origin = float(state["time_origin"])
+        self._step_origin = int(state["step_origin"])
+        self._dt = float(state["dt"])
 
     # ------------------------------------------------------------------ reading
     def energy(self) -> EnergyBudget:

@@ -53,8 +53,8 @@ ContactArrays = namedtuple(
 
 Workspace = namedtuple(
     "Workspace",
-    "force_buffer wall_buffer tally_buffer virial_correction wrapped wraps reference wall_reference "
-    "length_reference scale gather partial_gather flags energy info",
+    "force_buffer wall_buffer tally_buffer virial_correction lagged_virial lagged_kinetic wrapped wraps reference "
+    "wall_reference length_reference scale gather partial_gather flags energy info",
 )
 
 

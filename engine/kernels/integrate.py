@@ -52,8 +52,8 @@ INFO_SIZE = 5
 
 
 @njit(**KERNEL)
-def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
-                  reference, partial, out):
+def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+                  scale_y, reference, partial, out):
     """One pass over the disks: gather forces, kick, drift.
 
     - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque;
@@ -62,8 +62,9 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
       ``sum m v_a²`` and the work of prescribed motions and of loads over ``2 half``;
       ``store``: keep the totals in ``force``/``torque`` (else they stay those of the last
       store: a call of :func:`advance` stores on its last pass only);
-    - kick ``v += kick f/m``, ``w += kick tau/I`` (dynamic disks only; without ``gather``
-      with the stored forces);
+    - ``kicks`` half kicks ``v += half f/m``, ``w += half tau/I`` (dynamic disks only; without
+      ``gather`` with the stored forces): the second half kick of a step and the first of the
+      next are two additions, exactly as when a run stops and resumes between them;
     - drift ``x = x scale + drift v``, ``theta += drift w`` (every disk).
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
@@ -73,10 +74,10 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
     """
     n = p.position.shape[0]
     if n_chunks == 1:
-        particle_range(p, force_buffer, 1, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
+        particle_range(p, force_buffer, 1, gravity, has_loads, gather, store, half, kicks, drift, scale_x, scale_y,
                        reference, 0, n, out)
         return
-    _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
+    _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                               scale_x, scale_y, reference, partial)
     for k in range(GATHER_SIZE):
         out[k] = 0.0
@@ -89,17 +90,17 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
 
 
 @njit(**PARALLEL)
-def _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
+def _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                               scale_x, scale_y, reference, partial):
     n = p.position.shape[0]
     for c in prange(n_chunks):
-        particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x,
+        particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
                        scale_y, reference, c * n // n_chunks, (c + 1) * n // n_chunks, partial[c])
 
 
 @njit(**KERNEL)
-def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift, scale_x, scale_y,
-                   reference, lo, hi, out):
+def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+                   scale_y, reference, lo, hi, out):
     """:func:`particle_pass` for disks ``[lo, hi)``."""
     position = p.position
     velocity = p.velocity
@@ -175,9 +176,10 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
             fy = force[i, 1]
             tq = torque[i]
         if im > 0.0:
-            vx += kick * fx * im
-            vy += kick * fy * im
-            w += kick * tq * inv_inertia[i]
+            for _ in range(kicks):
+                vx += half * fx * im
+                vy += half * fy * im
+                w += half * tq * inv_inertia[i]
             velocity[i, 0] = vx
             velocity[i, 1] = vy
             omega[i] = w
@@ -217,11 +219,14 @@ def wall_load(w, m, t):
 
 
 @njit(**KERNEL)
-def walls_step(w, t, kick, drift):
-    """Kick force-controlled walls with the load at ``t`` and the disks' push; drift moving walls."""
+def walls_step(w, t, half, kicks, drift):
+    """``kicks`` half kicks of force-controlled walls with the load at ``t`` and the disks' push;
+    drift of moving walls."""
     for m in range(w.offset.shape[0]):
         if w.mode[m] == WALL_FORCE:
-            w.velocity[m] += kick * (wall_load(w, m, t) + w.particle_force[m]) * w.inv_mass[m]
+            acceleration = (wall_load(w, m, t) + w.particle_force[m]) * w.inv_mass[m]
+            for _ in range(kicks):
+                w.velocity[m] += half * acceleration
     for m in range(w.offset.shape[0]):
         if w.mode[m] != WALL_FIXED:
             w.offset[m] += drift * w.velocity[m]
@@ -229,26 +234,27 @@ def walls_step(w, t, kick, drift):
 
 
 @njit(**KERNEL)
-def measured_stress(cell, axis):
+def measured_stress(cell, virial, kinetic, axis):
     """Gilabert's sigma^M_aa = (sum m v_a² + sum f_a r_a) / A (compression positive)."""
-    area = cell.length[0] * cell.length[1]
-    return (cell.kinetic[axis] + cell.virial[axis, axis]) / area
+    return (kinetic[axis] + virial[axis, axis]) / (cell.length[0] * cell.length[1])
 
 
 @njit(**KERNEL)
-def cell_step(cell, kick, drift, scale):
-    """Kick a stress-controlled length (d²L/dt² = L0 (sigma^M - sigma^I) / M, Gilabert Eq. 3,
-    with |dL/dt| <= max_strain_rate L0), then drift the lengths; ``scale`` gets the affine
-    factors of the drift. Inside a call of :func:`advance` the measured stress is that of
-    the previous step (the forces' virial is summed by the same pass that drifts the disks).
+def cell_step(cell, virial, kinetic, half, kicks, drift, scale):
+    """``kicks`` half kicks of a stress-controlled length (d²L/dt² = L0 (sigma^M - sigma^I) / M,
+    Gilabert Eq. 3, with |dL/dt| <= max_strain_rate L0), then the drift of the lengths;
+    ``scale`` gets the affine factors of the drift. The measured stress comes from ``virial``
+    and ``kinetic``: those of the previous step (the virial of a step's forces is summed by
+    the same pass that drifts the disks).
     """
     for a in range(2):
         scale[a] = 1.0
         if cell.control[a] == CELL_STRESS:
-            mismatch = measured_stress(cell, a) - cell.target_stress[a]
-            cell.rate[a] += kick * cell.reference_length[a] * mismatch / cell.mass[0]
+            mismatch = measured_stress(cell, virial, kinetic, a) - cell.target_stress[a]
             cap = cell.max_strain_rate[0] * cell.reference_length[a]
-            cell.rate[a] = min(cap, max(-cap, cell.rate[a]))
+            for _ in range(kicks):
+                cell.rate[a] += half * cell.reference_length[a] * mismatch / cell.mass[0]
+                cell.rate[a] = min(cap, max(-cap, cell.rate[a]))
         if cell.control[a] == CELL_STRESS or cell.control[a] == CELL_STRAIN_RATE:
             new_length = cell.length[a] + drift * cell.rate[a]
             scale[a] = new_length / cell.length[a]
@@ -327,14 +333,17 @@ def _needs_rebuild(w, cell, ws, skin):
 
 
 @njit(**KERNEL)
-def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kick, drift, scale):
-    """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress, the
-    tallies the work of loads, of prescribed motions and of the cell's affine drift."""
-    particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kick, drift,
+def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks, drift, scale):
+    """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress (keeping the
+    previous ones for the barostat), the tallies the work of loads, of prescribed motions and
+    of the cell's affine drift."""
+    particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                   scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather)
     if gather:
         for a in range(2):
+            ws.lagged_kinetic[a] = cell.kinetic[a]
             for b in range(2):
+                ws.lagged_virial[a, b] = cell.virial[a, b]
                 cell.virial[a, b] = ws.gather[G_VXX + 2 * a + b] + ws.virial_correction[a, b]
             ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
         cell.kinetic[0] = ws.gather[G_KINETIC_X]
@@ -344,27 +353,29 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kick, 
 
 
 @njit(**JIT)
-def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time, n_steps,
-            skin, max_overlap, n_chunks):
-    """Run up to ``n_steps`` velocity-Verlet steps from ``time``; returns ``(steps_done, code)``.
+def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time_origin,
+            step_offset, n_steps, skin, max_overlap, n_chunks):
+    """Run up to ``n_steps`` velocity-Verlet steps; returns ``(steps_done, code)``.
 
-    ``dt = 0`` with ``n_steps = 1`` only evaluates the forces of the current state. This
-    outer loop rebuilds the contact table (which allocates); the steps themselves run in
-    :func:`_steps`, which never allocates and so needs no reference counting.
+    Step ``k`` of this call ends at ``time_origin + (step_offset + k + 1) dt``. ``dt = 0`` with
+    ``n_steps = 1`` only evaluates the forces of the current state. This outer loop rebuilds
+    the contact table (which allocates); the steps run in :func:`_steps`, which never
+    allocates and so needs no reference counting. A run split into several calls does the
+    same arithmetic as one call: it continues bit for bit.
     """
     if n_steps == 0:
         return 0, CODE_OK
     scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
-        _start(p, w, cell, ws, gravity, has_loads, dt, time, skin, n_chunks, scale)
+        _start(p, w, cell, ws, gravity, has_loads, dt, time_origin + step_offset * dt, skin, n_chunks, scale)
     step = 0
     while True:
         if ws.flags[FLAG_REBUILD]:
             code = rebuild(p, w, cell, ct, spare, ws, law, skin)
             if code != CODE_OK:
                 return step, code
-        step, code = _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time,
-                            step, n_steps, skin, max_overlap, n_chunks, scale)
+        step, code = _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt,
+                            time_origin, step_offset, step, n_steps, skin, max_overlap, n_chunks, scale)
         if code != CODE_REBUILD:
             return step, code
 
@@ -373,34 +384,34 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
 def _start(p, w, cell, ws, gravity, has_loads, dt, time, skin, n_chunks, scale):
     """First half kick and drift of a call that starts on a whole step."""
     half = 0.5 * dt
-    walls_step(w, time, half, dt)
-    cell_step(cell, half, dt, scale)
+    walls_step(w, time, half, 1, dt)
+    cell_step(cell, ws.lagged_virial, ws.lagged_kinetic, half, 1, dt, scale)
     for a in range(2):
         ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-    _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, 0.0, half, dt, scale)
+    _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, half, 1, dt, scale)
     ws.flags[FLAG_PHASE] = PHASE_DRIFTED
     if _needs_rebuild(w, cell, ws, skin):
         ws.flags[FLAG_REBUILD] = 1
 
 
 @njit(**KERNEL)
-def _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time, step, n_steps,
-           skin, max_overlap, n_chunks, scale):
+def _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time_origin, step_offset,
+           step, n_steps, skin, max_overlap, n_chunks, scale):
     """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``)."""
     half = 0.5 * dt
     while True:
         last = step + 1 == n_steps
         contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, last, n_chunks)
-        t = time + (step + 1) * dt
+        t = time_origin + (step_offset + step + 1) * dt
         if last:
-            walls_step(w, t, half, 0.0)
-            cell_step(cell, half, 0.0, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, True, half, half, 0.0, scale)
+            walls_step(w, t, half, 1, 0.0)
+            cell_step(cell, cell.virial, cell.kinetic, half, 1, 0.0, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, True, half, 1, 0.0, scale)
             ws.flags[FLAG_PHASE] = PHASE_ON_STEP
         else:
-            walls_step(w, t, dt, dt)
-            cell_step(cell, dt, dt, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, False, half, dt, dt, scale)
+            walls_step(w, t, half, 2, dt)
+            cell_step(cell, cell.virial, cell.kinetic, half, 2, dt, scale)
+            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, False, half, 2, dt, scale)
         step += 1
         if ws.gather[G_BAD] > 0:
             return step, CODE_NAN

@@ -1,0 +1,1 @@
+"""Analysis: pure functions of snapshots and recorded series, returning result dataclasses."""

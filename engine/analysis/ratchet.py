@@ -1,0 +1,67 @@
+"""Strain per cycle and the ratchet verdict of McNamara, García-Rojo & Herrmann (Sec. IV B 1).
+
+Pure functions of the wall positions recorded at the minimum of the load of each cycle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ParameterError
+
+
+def deviatoric_strain(length_x, length_y, length_x0: float, length_y0: float) -> np.ndarray:
+    """``gamma = L_y / L_y0 - L_x / L_x0`` (ratcheting Eq. 2)."""
+    return np.asarray(length_y, dtype=float) / length_y0 - np.asarray(length_x, dtype=float) / length_x0
+
+
+@dataclass(frozen=True)
+class RatchetVerdict:
+    """The paper's criterion and the behaviours of Sec. IV B 3.
+
+    - ``dgamma``: slope of the line fitted to gamma(N), the strain per cycle;
+    - ``rms_deviation``: RMS distance of the points from that line;
+    - ``ratcheting``: ``rms_deviation < |dgamma|`` (the paper's rule);
+    - ``shakedown``: the strain increments shrink (their size in the last third of the
+      cycles is below half that in the first third, with a negative trend);
+    - ``outlier_cycles``: cycles whose increment lies more than 6 robust standard
+      deviations (1.4826 × median absolute deviation) from the median increment.
+    """
+
+    dgamma: float
+    rms_deviation: float
+    ratcheting: bool
+    shakedown: bool
+    outlier_cycles: list[int] = field(default_factory=list)
+    cycles_used: int = 0
+    gamma: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+
+def ratchet_verdict(cycles, gamma) -> RatchetVerdict:
+    """Judge a strain series ``gamma`` recorded at the cycles ``cycles`` (at least 3 points)."""
+    cycles = np.asarray(cycles, dtype=float)
+    gamma = np.asarray(gamma, dtype=float)
+    if cycles.shape != gamma.shape or cycles.ndim != 1:
+        raise ParameterError("gamma", f"shape {gamma.shape}", f"one value per cycle ({cycles.shape})")
+    if cycles.size < 3:
+        raise ParameterError("cycles", int(cycles.size), "at least 3 cycles after the reference cycle")
+    if not np.all(np.isfinite(gamma)):
+        raise ParameterError("gamma", "non-finite values", "finite strains")
+    slope, intercept = np.polyfit(cycles, gamma, 1)
+    residual = gamma - (slope * cycles + intercept)
+    rms = float(np.sqrt(np.mean(residual ** 2)))
+    increments = np.diff(gamma)
+    median = np.median(increments)
+    spread = 1.4826 * np.median(np.abs(increments - median))
+    outliers = []
+    if spread > 0:
+        outliers = [int(cycles[k + 1]) for k in np.flatnonzero(np.abs(increments - median) > 6.0 * spread)]
+    third = max(1, increments.size // 3)
+    size = np.abs(increments)
+    early, late = float(np.mean(size[:third])), float(np.mean(size[-third:]))
+    trend = np.polyfit(np.arange(size.size), size, 1)[0] if size.size >= 2 else 0.0
+    shakedown = bool(increments.size >= 6 and early > 0 and late < 0.5 * early and trend < 0)
+    return RatchetVerdict(dgamma=float(slope), rms_deviation=rms, ratcheting=bool(rms < abs(slope)),
+                          shakedown=shakedown, outlier_cycles=outliers, cycles_used=int(cycles.size), gamma=gamma)
