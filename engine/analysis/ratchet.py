@@ -27,7 +27,8 @@ class RatchetVerdict:
     - ``shakedown``: the strain increments shrink (their size in the last third of the
       cycles is below half that in the first third, with a negative trend);
     - ``outlier_cycles``: cycles whose increment lies more than 6 robust standard
-      deviations (1.4826 × median absolute deviation) from the median increment.
+      deviations (1.4826 × median absolute deviation, at least 5 % of the median increment)
+      from the median increment.
     """
 
     dgamma: float
@@ -54,10 +55,9 @@ def ratchet_verdict(cycles, gamma) -> RatchetVerdict:
     rms = float(np.sqrt(np.mean(residual ** 2)))
     increments = np.diff(gamma)
     median = np.median(increments)
-    spread = 1.4826 * np.median(np.abs(increments - median))
-    outliers = []
-    if spread > 0:
-        outliers = [int(cycles[k + 1]) for k in np.flatnonzero(np.abs(increments - median) > 6.0 * spread)]
+    spread = max(1.4826 * np.median(np.abs(increments - median)), 0.05 * abs(median),
+                 1e-12 * float(np.max(np.abs(gamma))))
+    outliers = [int(cycles[k + 1]) for k in np.flatnonzero(np.abs(increments - median) > 6.0 * spread)]
     third = max(1, increments.size // 3)
     size = np.abs(increments)
     early, late = float(np.mean(size[:third])), float(np.mean(size[-third:]))

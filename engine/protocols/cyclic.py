@@ -1,0 +1,120 @@
+"""Cyclic loading of the biaxial box (ratcheting Eqs. 1, 4, 5).
+
+The top wall carries ``L_x (P0 + q_y(t))`` and the right wall ``L_y (P0 + q_x(t))`` with
+``q_y = Delta sigma (1 - cos(w t))`` and, for elliptic loading, ``q_x = Delta sigma (1 - cos(w t + phi))``
+(``q_x = 0`` otherwise). Time is counted from the start of the loading, so every cycle starts
+at the minimum of the load, where the wall positions are recorded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..params import Load, finite, nonnegative, positive
+from ..simulation import Simulation
+
+
+@dataclass(frozen=True)
+class CyclicLoad:
+    """``pressure`` P0, ``amplitude`` Delta sigma, ``period`` T, ``phase`` phi (radians) of the
+    elliptic loading of Eqs. 4-5, or ``None`` for the loading of Eq. 1 (only the top wall cycles)."""
+
+    pressure: float = 1.0
+    amplitude: float = 0.2
+    period: float = 10.0
+    phase: float | None = None
+
+    def __post_init__(self):
+        positive("pressure", self.pressure)
+        nonnegative("amplitude", self.amplitude)
+        positive("period", self.period)
+        if self.phase is not None:
+            finite("phase", self.phase)
+
+    def q(self, t: float) -> float:
+        """The deviatoric load ``q(t)`` on the top wall, t counted from the start of the loading."""
+        return self.amplitude * (1.0 - math.cos(2.0 * math.pi * t / self.period))
+
+
+@dataclass
+class CycleSeries:
+    """Wall positions at the start of each cycle (the minimum of the load): ``cycle[k]`` = k."""
+
+    cycle: list[int] = field(default_factory=list)
+    time: list[float] = field(default_factory=list)
+    length_x: list[float] = field(default_factory=list)
+    length_y: list[float] = field(default_factory=list)
+
+    def arrays(self):
+        return (np.array(self.cycle), np.array(self.length_x), np.array(self.length_y))
+
+
+def apply_load(sim: Simulation, load: CyclicLoad) -> float:
+    """Load the box's right and top walls; returns the start time of the loading (now)."""
+    for name in ("right", "top"):
+        if name not in sim.walls.names:
+            raise ParameterError("walls", sim.walls.names, "a biaxial box with walls named right and top")
+    start = sim.time
+    omega = 2.0 * math.pi / load.period
+    origin = -omega * start
+    sim.set_wall_load("top", Load(base=load.pressure, amplitude=load.amplitude, period=load.period, phase=origin))
+    x_amplitude = 0.0 if load.phase is None else load.amplitude
+    x_phase = origin + (0.0 if load.phase is None else load.phase)
+    sim.set_wall_load("right", Load(base=load.pressure, amplitude=x_amplitude, period=load.period, phase=x_phase))
+    return start
+
+
+def steps_per_cycle(sim: Simulation, load: CyclicLoad) -> int:
+    """Make the time step divide the period exactly (never larger than it was); returns T / dt."""
+    steps = math.ceil(load.period / sim.dt - 1e-9)
+    sim.set_dt(load.period / steps)
+    return steps
+
+
+def box_lengths(sim: Simulation) -> tuple[float, float]:
+    lengths = sim.box_lengths()
+    return float(lengths[0]), float(lengths[1])
+
+
+def run_cycles(sim: Simulation, load: CyclicLoad, cycles: int, on_cycle=None, samples_per_cycle: int = 0,
+               on_sample=None, series: CycleSeries | None = None) -> CycleSeries:
+    """Apply ``cycles`` cycles of ``load`` to a prepared biaxial box.
+
+    Records ``L_x, L_y`` at the start of every cycle (cycle 0 is the start of the loading).
+    ``on_cycle(k, sim, length_x, length_y)`` is called at each record; with ``samples_per_cycle``
+    > 0, ``on_sample(sim)`` is called that many times per cycle (e.g. to record the paths of
+    contacts in the Coulomb cone). ``series`` continues an earlier record.
+    """
+    if isinstance(cycles, bool) or not isinstance(cycles, (int, np.integer)) or cycles <= 0:
+        raise ParameterError("cycles", cycles, "a whole number of cycles > 0")
+    series = series if series is not None else CycleSeries()
+    per_cycle = steps_per_cycle(sim, load)
+    first = series.cycle[-1] if series.cycle else 0
+    if not series.cycle:
+        apply_load(sim, load)
+        _record(series, 0, sim, on_cycle)
+    chunks = [per_cycle]
+    if samples_per_cycle > 0:
+        base = per_cycle // samples_per_cycle
+        chunks = [base] * (samples_per_cycle - 1) + [per_cycle - base * (samples_per_cycle - 1)]
+    for cycle in range(first + 1, first + cycles + 1):
+        for steps in chunks:
+            sim.run(steps)
+            if on_sample is not None:
+                on_sample(sim)
+        _record(series, cycle, sim, on_cycle)
+    return series
+
+
+def _record(series: CycleSeries, cycle: int, sim: Simulation, on_cycle) -> None:
+    length_x, length_y = box_lengths(sim)
+    series.cycle.append(cycle)
+    series.time.append(sim.time)
+    series.length_x.append(length_x)
+    series.length_y.append(length_y)
+    if on_cycle is not None:
+        on_cycle(cycle, sim, length_x, length_y)

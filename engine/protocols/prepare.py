@@ -1,0 +1,214 @@
+"""Preparing packings: the biaxial box of the ratcheting paper and Gilabert's methods 1 and 2.
+
+Each function returns a :class:`Prepared`: the simulation, ready for the next stage, the
+last equilibrium report (Gilabert Sec. II D) and the simulated and wall-clock time it took.
+A preparation that does not reach equilibrium within its time limit is returned as such
+(``equilibrated`` false): the caller decides.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import ParameterError
+from ..generate import radii, random_gas, square_lattice
+from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, positive
+from ..simulation import Simulation
+from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState
+from .equilibrium import EquilibriumReport, equilibrium, measured_pressure, relax
+
+
+@dataclass
+class Prepared:
+    sim: Simulation
+    report: EquilibriumReport
+    sim_time: float
+    wall_time_s: float
+    method: str
+    pressure: float
+
+    @property
+    def equilibrated(self) -> bool:
+        return self.report.equilibrated
+
+
+# ---------------------------------------------------------------------------------------------- biaxial box
+def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness: float = 100.0,
+                box: float = 1.0, density: float = 1.0, damping_ratio: float = 0.3, normal_model: str = "linear",
+                tangential_model: str = "cundall-strack", wall_mass: float | None = None, dt: float | None = None,
+                dt_safety: float = 0.2) -> Simulation:
+    """The initial biaxial box of ratcheting Sec. IV B 1, before compression.
+
+    Units: box length L, pressure p (a 2D pressure, force per length) and density rho, so the
+    time unit is ``tau = sqrt(rho L² / p)``. Radii are uniform in ``r_max [0.7, 1]`` with
+    ``r_max = L / (2 s)``, the disks on the sites of an ``s × s`` square lattice (the first
+    ``count`` sites, ``s = ceil(sqrt(count))``); ``K_n = K_t = stiffness × p``; the left and
+    bottom walls are fixed, the right and top ones pushed with ``pressure`` per unit length
+    (mass ``wall_mass``, default the total mass of the disks). Frictionless (mu = 0).
+    """
+    if not isinstance(count, (int, np.integer)) or count < 1:
+        raise ParameterError("particles", count, "a whole number >= 1")
+    pressure = positive("pressure", pressure)
+    side = math.ceil(math.sqrt(count))
+    r_max = box / (2.0 * side)
+    r = r_max * np.random.default_rng(seed).uniform(0.7, 1.0, count)
+    positions = square_lattice(side, side, box / side, origin=(r_max, r_max))[:count]
+    particles = ParticleState(positions, r, density=density)
+    law = ContactLaw(normal_stiffness=stiffness * pressure, tangential_stiffness=stiffness * pressure, friction=0.0,
+                     damping_ratio=damping_ratio, normal_model=normal_model, tangential_model=tangential_model)
+    mass = float(particles.mass.sum()) if wall_mass is None else wall_mass
+    walls = box_walls(0.0, box, 0.0, box, loads={"right": Load(base=pressure), "top": Load(base=pressure)},
+                      wall_mass=mass)
+    return Simulation(particles, law, Integration(dt=dt, dt_safety=dt_safety), walls=walls)
+
+
+def compress(count: int = 16, seed: int = 0, pressure: float = 1.0, friction: float = 0.2,
+             max_time: float = 400.0, **box_options) -> Prepared:
+    """Ratcheting Sec. IV B 1: compress the biaxial box frictionless to ``pressure``, then switch
+    friction on. Stops when Gilabert's equilibrium criteria hold (F1 = P a) or after ``max_time``."""
+    start = time.perf_counter()
+    sim = biaxial_box(count, seed, pressure, **box_options)
+    relaxation = relax(sim, pressure, max_time)
+    sim.set_law(friction=friction)
+    return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "compress", pressure)
+
+
+# ---------------------------------------------------------------------------------------------- Gilabert
+def gilabert_radii(count: int, diameter: float = 1.0, seed: int = 0) -> np.ndarray:
+    """Diameters uniform in [a/2, a] (Gilabert Sec. II A)."""
+    return radii(count, radius_min=diameter / 4.0, radius_max=diameter / 2.0, distribution="uniform", seed=seed)
+
+
+def gilabert_law(friction: float = 0.15, kappa: float = 1e5, cohesion: bool = True, rolling: bool = False,
+                 pressure: float = 0.01, diameter: float = 1.0, damping_ratio: float = 0.8) -> ContactLaw:
+    """The interaction law of Gilabert Table I, in units of the largest diameter ``a`` and of
+    ``F0`` (cohesive: ``F0 = 1``, ``kappa = a K_N / F0``, ``D0 = 1e-3 a``) or of ``P a``
+    (cohesionless: ``kappa = K_N / P``); ``K_T = K_N``; with rolling resistance
+    ``K_r = 1e-4 K_N a²`` and ``mu_r = 1e-2 mu a``."""
+    force_scale = 1.0 if cohesion else pressure * diameter
+    kn = kappa * force_scale / diameter
+    return ContactLaw(normal_stiffness=kn, tangential_stiffness=kn, friction=friction, damping_ratio=damping_ratio,
+                      cohesion_force=1.0 if cohesion else 0.0, cohesion_range=1e-3 * diameter if cohesion else 0.0,
+                      rolling_stiffness=1e-4 * kn * diameter ** 2 if rolling else 0.0,
+                      rolling_friction=1e-2 * friction * diameter if rolling else 0.0)
+
+
+def _gas(count, solid_fraction, seed, diameter):
+    r = gilabert_radii(count, diameter, seed)
+    fraction = positive("solid_fraction", solid_fraction)
+    if fraction >= 0.55:
+        raise ParameterError("solid_fraction", fraction, "a gas fraction below 0.55 (random placement jams)")
+    length = math.sqrt(math.pi * float(np.sum(r ** 2)) / fraction)
+    positions = random_gas(r, (0.0, length, 0.0, length), periodic=(True, True), seed=seed)
+    return r, positions, length
+
+
+def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
+            seed: int = 0, diameter: float = 1.0, max_time: float = 2000.0, cell_mass: float | None = None,
+            dt_safety: float = 0.3) -> Prepared:
+    """Gilabert Sec. III A: a granular gas at ``solid_fraction`` in a periodic cell, at rest, brought
+    to equilibrium under the isotropic ``pressure`` by stress control of the cell (Eq. 3)."""
+    start = time.perf_counter()
+    law = law or gilabert_law(pressure=pressure, diameter=diameter)
+    r, positions, length = _gas(count, solid_fraction, seed, diameter)
+    cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(pressure, pressure), mass=cell_mass)
+    sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi / diameter ** 2), law,
+                     Integration(dt_safety=dt_safety), cell=cell)
+    relaxation = relax(sim, pressure, max_time)
+    return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "1", pressure)
+
+
+def clusters(sim: Simulation) -> int:
+    """Number of clusters: disks joined by touching contacts or distant cohesive interactions."""
+    n = sim.particles.count
+    table = sim.contacts
+    rows = table.count
+    linked = (table.status[:rows] != STATUS_NONE) & (table.particle_j[:rows] < n)
+    i = table.particle_i[:rows][linked]
+    j = table.particle_j[:rows][linked]
+    graph = coo_matrix((np.ones(i.size), (i, j)), shape=(n, n))
+    return int(connected_components(graph, directed=False)[0])
+
+
+def touching_contacts(sim: Simulation) -> int:
+    status = sim.contacts.status[:sim.contacts.count]
+    return int(np.count_nonzero(np.isin(status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))))
+
+
+def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
+            speed: float | None = None, seed: int = 0, diameter: float = 1.0, max_time: float = 4000.0,
+            max_strain_rate: float = 1e-3, accelerated: bool = False, soft_kappa: float = 100.0,
+            cell_mass: float | None = None, dt_safety: float = 0.3) -> Prepared:
+    """Gilabert Sec. III B, for cohesive laws.
+
+    1. A gas at ``solid_fraction`` with Maxwellian velocities of mean quadratic velocity ``speed``
+       (default ``V* = sqrt(F0 D0)``, Gilabert Eq. 7) aggregates in a cell of fixed size until
+       it forms one cluster with balanced forces and moments (a compact aggregate may still
+       spin as a rigid body, which nothing damps: the kinetic criterion waits for stage 2);
+    2. it relaxes at ``P* = 0`` with the cell free (stress control to zero) until forces, moments
+       and stress balance;
+    3. it is compressed to ``pressure`` under the strain-rate cap ``max_strain_rate``.
+
+    ``accelerated`` (series B): aggregate with soft contacts ``kappa = soft_kappa`` and then
+    stiffen them slowly to the law's ``kappa`` before stage 2. ``max_time`` bounds each stage.
+    """
+    start = time.perf_counter()
+    law = law or gilabert_law(pressure=pressure, diameter=diameter)
+    if law.cohesion_force <= 0:
+        raise ParameterError("cohesion_force", law.cohesion_force, "a cohesive law (F0 > 0) for method 2")
+    r, positions, length = _gas(count, solid_fraction, seed, diameter)
+    rng = np.random.default_rng(seed + 7)
+    speed = math.sqrt(law.cohesion_force * law.cohesion_range) if speed is None else speed
+    velocity = rng.normal(0.0, speed / math.sqrt(2.0), size=(count, 2))
+    mass = r ** 2
+    velocity -= (mass[:, None] * velocity).sum(axis=0) / mass.sum()
+    particles = ParticleState(positions, r, velocity=velocity, density=4.0 / math.pi / diameter ** 2)
+    target_kn = law.normal_stiffness
+    first_law = law.replace(normal_stiffness=soft_kappa * law.cohesion_force / diameter,
+                            tangential_stiffness=soft_kappa * law.cohesion_force / diameter) if accelerated else law
+    cell = PeriodicCell((length, length), control=("fixed", "fixed"), mass=cell_mass)
+    sim = Simulation(particles, first_law, Integration(dt_safety=dt_safety), cell=cell)
+    sim_time = 0.0
+    # stage 1: aggregation at fixed size, until one cluster in equilibrium
+    check = max(sim.dt, 1.0)
+    stage_start = time.perf_counter()
+    while sim.time < max_time:
+        sim.run_for(check)
+        if clusters(sim) == 1:
+            report = equilibrium(sim, measured_pressure(sim))
+            if report.force < 1.0 and report.moment < 1.0:
+                break
+    stages = {"aggregation": (sim.time, time.perf_counter() - stage_start)}
+    if accelerated:
+        _stiffen(sim, target_kn, law)
+    sim_time += sim.time
+    # stage 2: relaxation with the cell free at zero stress
+    sim.set_cell_stress(0.0, max_strain_rate)
+    relaxation = relax(sim, 0.0, max_time, kinetic=False)
+    stages["relaxation"] = (relaxation.sim_time, relaxation.wall_time_s)
+    sim_time += relaxation.sim_time
+    # stage 3: compression to the target pressure
+    sim.set_cell_stress(pressure, max_strain_rate)
+    relaxation = relax(sim, pressure, max_time)
+    stages["compression"] = (relaxation.sim_time, relaxation.wall_time_s)
+    sim_time += relaxation.sim_time
+    prepared = Prepared(sim, relaxation.report, sim_time, time.perf_counter() - start,
+                        "2B" if accelerated else "2", pressure)
+    prepared.stages = stages
+    return prepared
+
+
+def _stiffen(sim: Simulation, target_kn: float, law: ContactLaw, steps: int = 20) -> None:
+    """Raise K_N and K_T geometrically to ``target_kn`` in ``steps`` stages, relaxing after each."""
+    factor = (target_kn / sim.law.normal_stiffness) ** (1.0 / steps)
+    for _ in range(steps):
+        kn = min(target_kn, sim.law.normal_stiffness * factor)
+        sim.set_law(normal_stiffness=kn, tangential_stiffness=kn * law.tangential_stiffness / law.normal_stiffness)
+        sim.run_for(20.0 * math.sqrt(float(sim.particles.mass.min()) / kn) * 2.0 * math.pi)
+    sim.set_law(**{k: getattr(law, k) for k in ("normal_stiffness", "tangential_stiffness")})

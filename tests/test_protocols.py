@@ -1,0 +1,118 @@
+"""Preparation protocols reach Gilabert's equilibrium; cyclic loading reproduces the ratcheting paper."""
+
+import math
+
+import numpy as np
+import pytest
+
+from engine import ContactLaw, ParameterError, ParticleState, Simulation, box_walls
+from engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
+from engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
+from engine.protocols.equilibrium import equilibrium, measured_pressure
+from engine.protocols.prepare import clusters, compress, gilabert_law, method1, method2
+
+
+@pytest.fixture(scope="module")
+def box16():
+    return compress(16, seed=0, friction=0.2)
+
+
+def test_compress_reaches_equilibrium_at_the_imposed_pressure(box16):
+    report = box16.report
+    assert box16.equilibrated
+    assert max(report.force, report.moment, report.pressure, report.kinetic) < 1.0
+    sim = box16.sim
+    lx, ly = sim.box_lengths()
+    # ratcheting Eq. 1 with q = 0: F_x = P0 L_y, F_y = P0 L_x
+    assert -sim.walls.particle_force[sim.wall_index("right")] == pytest.approx(ly, rel=1e-3)
+    assert -sim.walls.particle_force[sim.wall_index("top")] == pytest.approx(lx, rel=1e-3)
+    assert sim.law.friction == 0.2 and sim.law.normal_stiffness == 100.0
+
+
+def test_equilibrium_test_rejects_a_moving_packing(box16):
+    sim = box16.sim.clone()
+    sim.particles.velocity[3] = (0.05, 0.0)
+    report = equilibrium(sim, 1.0)
+    assert not report.equilibrated and report.kinetic > 1.0
+
+
+@pytest.mark.parametrize("cohesion", [False, True])
+def test_method1_reaches_equilibrium_under_stress_control(cohesion):
+    pressure = 0.01
+    prepared = method1(60, pressure=pressure, law=gilabert_law(cohesion=cohesion, pressure=pressure), max_time=1500)
+    assert prepared.equilibrated
+    assert measured_pressure(prepared.sim) == pytest.approx(pressure, abs=1e-4 * prepared.report.force_scale)
+    phi = np.pi * np.sum(prepared.sim.particles.radius ** 2) / np.prod(prepared.sim.cell.length)
+    assert 0.6 < phi < 0.9
+
+
+def test_method2_aggregates_into_one_cluster_in_equilibrium():
+    law = gilabert_law(cohesion=True, pressure=0.01, kappa=1e4)
+    prepared = method2(20, pressure=0.01, law=law, accelerated=True, max_time=2000)
+    assert prepared.equilibrated
+    assert clusters(prepared.sim) == 1
+    assert prepared.sim.law.normal_stiffness == law.normal_stiffness
+    with pytest.raises(ParameterError, match="cohesive law"):
+        method2(10, law=gilabert_law(cohesion=False))
+
+
+def test_cyclic_load_is_ratcheting_eq1_and_cycles_are_whole_steps(box16):
+    sim = box16.sim.clone()
+    load = CyclicLoad(pressure=1.0, amplitude=0.2, period=10.0)
+    start = apply_load(sim, load)
+    steps = steps_per_cycle(sim, load)
+    assert steps * sim.dt == pytest.approx(10.0, rel=1e-12)
+    from engine.kernels.integrate import wall_load
+    top = sim.wall_index("top")
+    lx = sim.box_lengths()[0]
+    w = sim.walls.arrays()
+    assert wall_load(w, top, start) == pytest.approx(lx * 1.0)
+    assert wall_load(w, top, start + 5.0) == pytest.approx(lx * (1.0 + 0.4))
+    assert wall_load(w, sim.wall_index("right"), start + 5.0) == pytest.approx(sim.box_lengths()[1])
+    series = run_cycles(sim, load, 3)
+    assert series.cycle == [0, 1, 2, 3]
+    assert series.time[-1] - series.time[0] == pytest.approx(30.0, rel=1e-12)
+
+
+def _dgamma(base, model, dt_factor=0.2, cycles=40, reference=10, **load):
+    sim = base.clone(tangential_model=model)
+    sim.set_dt(dt_factor * math.sqrt(sim.particles.mass.min() / sim.law.normal_stiffness))
+    series = run_cycles(sim, CyclicLoad(1.0, 0.2, 10.0, **load), cycles)
+    cycles, lx, ly = series.arrays()
+    gamma = deviatoric_strain(lx[reference:], ly[reference:], lx[reference], ly[reference])
+    return ratchet_verdict(cycles[reference:], gamma)
+
+
+def test_cundall_strack_ratchets_and_the_angle_spring_does_not(box16):
+    cs = _dgamma(box16.sim, "cundall-strack")
+    angle = _dgamma(box16.sim, "angle")
+    assert cs.ratcheting and abs(cs.dgamma) > 1e-9
+    assert not angle.ratcheting and abs(angle.dgamma) < 1e-6 * abs(cs.dgamma)
+
+
+def test_alpha_residue_scales_with_dt_and_cundall_strack_does_not(box16):
+    # ratcheting Fig. 14
+    cs = [_dgamma(box16.sim, "cundall-strack", f).dgamma for f in (0.2, 0.1)]
+    alpha = [_dgamma(box16.sim, "alpha", f).dgamma for f in (0.2, 0.1)]
+    assert cs[1] == pytest.approx(cs[0], rel=0.02)
+    assert alpha[1] == pytest.approx(alpha[0] / 2, rel=0.05)
+    assert abs(alpha[0]) < 0.1 * abs(cs[0])
+
+
+def test_elliptic_loading_without_sliding_gives_dgamma_proportional_to_sin_phi():
+    # ratcheting Eqs. 4-5, Fig. 5 (mu = inf)
+    base = compress(16, seed=0, friction=math.inf).sim
+    values = {deg: _dgamma(base, "cundall-strack", cycles=15, reference=5, phase=math.radians(deg)).dgamma
+              for deg in (-90, 30, 90)}
+    assert values[90] == pytest.approx(-values[-90], rel=0.02)
+    assert values[30] == pytest.approx(0.5 * values[90], rel=0.05)
+    assert abs(values[90]) > 1e-7
+
+
+def test_cyclic_loading_needs_a_biaxial_box_and_whole_cycles():
+    sim = Simulation(ParticleState([[1.0, 1.0]], [0.5]), ContactLaw(), walls=box_walls(0, 3, 0, 3))
+    with pytest.raises(ParameterError, match="cycles = 0 is not allowed"):
+        run_cycles(sim, CyclicLoad(), 0)
+    free = Simulation(ParticleState([[1.0, 1.0]], [0.5]), ContactLaw())
+    with pytest.raises(ParameterError, match="walls named right and top"):
+        run_cycles(free, CyclicLoad(), 2)
