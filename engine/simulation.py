@@ -24,8 +24,8 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
                            TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA)
-from .params import ContactLaw, Integration, Load, PeriodicCell, Wall, finite
-from .state import (KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
+from .params import ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
+from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
                     ParticleState, WallState, Workspace)
 
 NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
@@ -176,6 +176,7 @@ class Snapshot:
     wall_offsets: np.ndarray
     wall_forces: np.ndarray
     cell_lengths: np.ndarray
+    box_lengths: np.ndarray
     periodic: tuple[bool, bool]
     virial: np.ndarray
     energy: EnergyBudget
@@ -190,17 +191,20 @@ class Simulation:
     Arguments: ``particles`` (:class:`ParticleState`), ``law`` (:class:`ContactLaw`),
     ``integration`` (:class:`Integration`), ``walls`` (tuple of :class:`Wall`),
     ``cell`` (:class:`PeriodicCell` or ``None`` for open axes), ``gravity`` (gx, gy).
+    ``check_initial_overlap=False`` skips the test of the initial overlaps (for a state about to
+    be replaced by :meth:`restore_state`).
     """
 
     def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
-                 cell: PeriodicCell | None = None, gravity=(0.0, 0.0)):
+                 cell: PeriodicCell | None = None, gravity=(0.0, 0.0), check_initial_overlap: bool = True):
         if not isinstance(particles, ParticleState):
             raise ParameterError("particles", type(particles).__name__, "a ParticleState")
         self.particles = particles
         self.law = law
         self.integration = integration
         self.cell_params = cell
+        self.wall_params = tuple(walls)
         self._check_geometry(walls, cell)
         self.walls = WallState(tuple(walls))
         self.cell = CellState(cell, float(particles.mass.sum()))
@@ -229,7 +233,8 @@ class Simulation:
             flags=flags,
             energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))
         self._advance(0.0, 1)
-        self._check_initial_overlap()
+        if check_initial_overlap:
+            self._check_initial_overlap()
 
     # ------------------------------------------------------------------ set-up checks
     @staticmethod
@@ -421,6 +426,18 @@ class Simulation:
         self.integration = integration
         return self.dt
 
+    def set_cell_stress(self, stress: float, max_strain_rate: float | None = None) -> None:
+        """Put both axes of a periodic cell under isotropic stress control at ``stress``
+        (Gilabert Eq. 3), measuring strains from the current lengths."""
+        if not all(self.periodic):
+            raise ParameterError("cell", self.periodic, "a cell periodic along both axes for stress control")
+        cell = self.cell
+        cell.control[:] = CELL_STRESS
+        cell.target_stress[:] = finite("stress", stress)
+        cell.reference_length[:] = cell.length
+        if max_strain_rate is not None:
+            cell.max_strain_rate[0] = positive("max_strain_rate", max_strain_rate, allow_inf=True)
+
     def set_gravity(self, gx: float, gy: float) -> None:
         self.gravity[:] = (finite("gravity[0]", gx), finite("gravity[1]", gy))
 
@@ -512,6 +529,17 @@ class Simulation:
         self._step_origin = int(state["step_origin"])
         self._dt = float(state["dt"])
 
+    def clone(self, **law_changes) -> "Simulation":
+        """An independent simulation in the same state (optionally with other law parameters)."""
+        p = self.particles
+        clone = Simulation(ParticleState(p.position, p.radius, mass=p.mass, inertia=p.inertia, kind=p.kind),
+                           self.law, self.integration.replace(dt=self.dt), self.wall_params, self.cell_params,
+                           tuple(self.gravity), check_initial_overlap=False)
+        clone.restore_state(self.export_state())
+        if law_changes:
+            clone.set_law(**law_changes)
+        return clone
+
     # ------------------------------------------------------------------ reading
     def energy(self) -> EnergyBudget:
         terms = np.zeros(ENERGY_SIZE)
@@ -551,8 +579,30 @@ class Simulation:
             contacts=self.contact_snapshot(), wall_names=tuple(self.walls.names),
             wall_normals=self.walls.normal.copy(), wall_offsets=self.walls.offset.copy(),
             wall_forces=self.walls.particle_force.copy(), cell_lengths=self.cell.length.copy(),
+            box_lengths=self.box_lengths(),
             periodic=self.periodic, virial=self.cell.virial.copy(), energy=self.energy(), law=self.law,
             dt=self.dt)
+
+    def box_lengths(self) -> np.ndarray:
+        """Lengths of the domain: periodic lengths, the distance between the walls named
+        left/right (bottom/top), or else the extent of the disks along the axis."""
+        edges = np.array(self.cell.length, dtype=float)
+        names = self.walls.names
+        for axis, (low, high) in enumerate((("left", "right"), ("bottom", "top"))):
+            if edges[axis] > 0:
+                continue
+            if low in names and high in names:
+                edges[axis] = -(self.walls.offset[names.index(low)] + self.walls.offset[names.index(high)])
+            else:
+                edges[axis] = float(np.ptp(self.particles.position[:, axis]) + 2.0 * self.particles.radius.max())
+        return edges
+
+    def stress(self) -> np.ndarray:
+        """Mean stress ``(sum m v ⊗ v + sum_contacts f ⊗ r) / A`` (2 × 2, compression positive) over
+        the domain of :meth:`box_lengths`, from disk-disk contacts (the loads on walls give the
+        stress at a walled boundary). The kinetic part counts the diagonal only."""
+        lengths = self.box_lengths()
+        return (self.cell.virial + np.diag(self.cell.kinetic)) / float(lengths[0] * lengths[1])
 
     def status_counts(self) -> dict[str, int]:
         """Number of contacts per status name."""

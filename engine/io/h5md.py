@@ -1,0 +1,434 @@
+"""Run files: HDF5 after H5MD 1.1, appended frame by frame, with checkpoints.
+
+Layout (``docs/run-files.md`` describes every dataset)::
+
+    /h5md                         version = [1, 1]; /author, /creator
+    /particles/all/box            dimension = 2, boundary = [x, y]; edges: time-dependent
+    /particles/all/{position, velocity, angle, omega, radius, mass}   time-dependent elements
+    /particles/all/kind           per-disk kind (0 dynamic, 1 fixed, 2 kinematic)
+    /contacts                     the contact table of each frame (GranLab extension)
+    /observables/{energy, walls, stress}   time series at the frames
+    /observables/cycles           one record per loading cycle
+    /observables/contact_paths    (F_n, F_t, status) of watched contacts
+    /parameters                   every parameter (attributes, JSON) and the scene text
+    /checkpoint                   two slots of the full state; /checkpoint/valid names the good one
+
+A time-dependent element is a group with ``step``, ``time`` and ``value`` datasets whose first
+axis is the frame. The file is written in SWMR mode and flushed after every frame, cycle and
+checkpoint, so a run killed at any moment leaves a file readable up to its last complete frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..errors import GranLabError
+from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall
+from ..simulation import Simulation
+from ..state import STATUS_NAMES, ParticleState
+
+ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
+                 "dissipated_sliding", "dissipated_rolling", "dissipated_opening", "work_walls", "work_cell",
+                 "work_prescribed", "work_external")
+CONTACT_FIELDS = (("pair", np.int32, (2,)), ("image", np.int8, (2,)), ("status", np.int8, ()),
+                  ("normal_force", np.float64, ()), ("tangential_force", np.float64, ()),
+                  ("surface_gap", np.float64, ()), ("tangential_spring", np.float64, ()),
+                  ("rolling_spring", np.float64, ()), ("rolling_distance", np.float64, ()))
+CYCLE_FIELDS = ("cycle", "step", "time", "length_x", "length_y")
+PARTICLE_ELEMENTS = (("position", (2,)), ("velocity", (2,)), ("angle", ()), ("omega", ()), ("radius", ()),
+                     ("mass", ()))
+
+
+class RunFileError(GranLabError, OSError):
+    """A run file that is missing, not HDF5, not H5MD, or lacks what was asked of it."""
+
+
+def _extendable(group, name, shape, dtype, chunk_rows=64):
+    return group.create_dataset(name, shape=(0,) + tuple(shape), maxshape=(None,) + tuple(shape), dtype=dtype,
+                                chunks=(chunk_rows,) + tuple(shape))
+
+
+def _append(dataset, value) -> None:
+    n = dataset.shape[0]
+    dataset.resize((n + 1,) + dataset.shape[1:])
+    dataset[n] = value
+
+
+def _time_dependent(group, name, shape, dtype=np.float64, chunk_rows=16):
+    element = group.create_group(name)
+    _extendable(element, "step", (), np.int64)
+    _extendable(element, "time", (), np.float64)
+    _extendable(element, "value", shape, dtype, chunk_rows)
+    return element
+
+
+def to_json(value) -> str:
+    """JSON of parameter dataclasses (inf and NaN allowed, as Python's json writes them)."""
+    def plain(v):
+        if dataclasses.is_dataclass(v):
+            return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, (list, tuple)):
+            return [plain(x) for x in v]
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
+        if isinstance(v, np.generic):
+            return v.item()
+        return v
+    return json.dumps(plain(value))
+
+
+def walls_from_json(text: str) -> tuple[Wall, ...]:
+    walls = []
+    for item in json.loads(text):
+        item = dict(item)
+        item["load"] = Load(**item["load"])
+        item["normal"] = tuple(item["normal"])
+        if item["load_per_length_of"] is not None:
+            item["load_per_length_of"] = tuple(item["load_per_length_of"])
+        walls.append(Wall(**item))
+    return tuple(walls)
+
+
+def cell_from_json(text: str) -> PeriodicCell | None:
+    data = json.loads(text)
+    if data is None:
+        return None
+    return PeriodicCell(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
+class RunWriter:
+    """Writes a run file for one simulation.
+
+    ``scene`` is the scene text (TOML), ``protocol`` a JSON-able description of what was run,
+    ``watch`` pairs ``(i, j)`` (``j >= N``: a wall) whose (F_n, F_t, status) are recorded by
+    :meth:`write_contact_sample`. Use as a context manager.
+    """
+
+    def __init__(self, path: str | Path, sim: Simulation, scene: str = "", protocol: dict | None = None,
+                 watch: list[tuple[int, int]] | None = None, author: str = "GranLab user"):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        n = sim.particles.count
+        nw = sim.walls.count
+        f = h5py.File(self.path, "w", libver="latest")
+        self.file = f
+        h5md = f.create_group("h5md")
+        h5md.attrs["version"] = np.array([1, 1])
+        h5md.create_group("author").attrs["name"] = author
+        creator = h5md.create_group("creator")
+        creator.attrs["name"] = "GranLab"
+        creator.attrs["version"] = __version__
+        particles = f.create_group("particles/all")
+        box = particles.create_group("box")
+        box.attrs["dimension"] = 2
+        box.attrs["boundary"] = np.array(["periodic" if p else "none" for p in sim.periodic], dtype="S8")
+        _time_dependent(box, "edges", (2,))
+        for name, shape in PARTICLE_ELEMENTS:
+            _time_dependent(particles, name, (n,) + shape)
+        particles.create_dataset("kind", data=sim.particles.kind)
+        contacts = f.create_group("contacts")
+        contacts.attrs["status_names"] = np.array(STATUS_NAMES, dtype="S12")
+        _extendable(contacts, "step", (), np.int64)
+        _extendable(contacts, "time", (), np.float64)
+        contacts.create_dataset("offset", data=np.zeros(1, dtype=np.int64), maxshape=(None,), chunks=(64,))
+        for name, dtype, shape in CONTACT_FIELDS:
+            _extendable(contacts, name, shape, dtype, chunk_rows=4096)
+        observables = f.create_group("observables")
+        energy = _time_dependent(observables, "energy", (len(ENERGY_FIELDS),))
+        energy.attrs["fields"] = np.array(ENERGY_FIELDS, dtype="S24")
+        walls = observables.create_group("walls")
+        walls.attrs["names"] = np.array(sim.walls.names, dtype="S32")
+        _time_dependent(walls, "position", (nw,))
+        _time_dependent(walls, "force", (nw,))
+        _time_dependent(observables, "stress", (2, 2))
+        cycles = observables.create_group("cycles")
+        for name in CYCLE_FIELDS:
+            _extendable(cycles, name, (), np.int64 if name in ("cycle", "step") else np.float64)
+        _extendable(cycles, "wall_position", (nw,), np.float64)
+        paths = observables.create_group("contact_paths")
+        paths.create_dataset("pair", data=np.array(watch or [], dtype=np.int64).reshape(-1, 2))
+        n_watch = len(watch or [])
+        _extendable(paths, "time", (), np.float64, 256)
+        for name, dtype in (("normal_force", np.float64), ("tangential_force", np.float64), ("status", np.int8)):
+            paths.create_dataset(name, shape=(0, n_watch), maxshape=(None, None), dtype=dtype,
+                                 chunks=(256, max(1, n_watch)))
+        self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
+        self._create_checkpoint(f.create_group("checkpoint"), sim)
+        f.swmr_mode = True
+        self.watch = list(watch or [])
+        self._handles = {}
+        self._cycles = []
+
+    # ------------------------------------------------------------------ creation
+    @staticmethod
+    def _write_parameters(group, sim: Simulation, scene: str, protocol: dict | None) -> None:
+        for name, value in dataclasses.asdict(sim.law).items():
+            group.attrs[f"contact.{name}"] = value
+        for name, value in dataclasses.asdict(sim.integration).items():
+            group.attrs[f"integration.{name}"] = "none" if value is None else value
+        group.attrs["dt"] = sim.dt
+        group.attrs["skin"] = sim.skin
+        group.attrs["gravity"] = sim.gravity
+        group.attrs["law_json"] = to_json(sim.law)
+        group.attrs["integration_json"] = to_json(sim.integration)
+        group.attrs["walls_json"] = to_json(sim.wall_params)
+        group.attrs["cell_json"] = to_json(sim.cell_params)
+        group.attrs["protocol_json"] = to_json(protocol or {})
+        group.create_dataset("scene", data=scene)
+
+    @staticmethod
+    def _create_checkpoint(group, sim: Simulation) -> None:
+        state = sim.export_state()
+        for slot in ("slot0", "slot1"):
+            g = group.create_group(slot)
+            for key, value in state.items():
+                value = np.asarray(value)
+                if key.startswith("contacts/"):
+                    g.create_dataset(key, shape=(0,) + value.shape[1:], maxshape=(None,) + value.shape[1:],
+                                     dtype=value.dtype, chunks=(4096,) + value.shape[1:])
+                else:
+                    g.create_dataset(key, shape=value.shape, dtype=value.dtype)
+        group.create_dataset("valid", data=np.array([-1, -1], dtype=np.int64))
+
+    # ------------------------------------------------------------------ appending
+    def _get(self, path: str):
+        handle = self._handles.get(path)
+        if handle is None:
+            handle = self._handles[path] = self.file[path]
+        return handle
+
+    def _element(self, path: str, step: int, time: float, value) -> None:
+        _append(self._get(f"{path}/value"), value)
+        _append(self._get(f"{path}/time"), time)
+        _append(self._get(f"{path}/step"), step)
+
+    def write_frame(self, sim: Simulation) -> None:
+        """Append the current state as a frame (positions, contacts, observables) and the
+        cycle records waiting in memory; flush."""
+        self._write_cycles()
+        step, time = sim.step, sim.time
+        snap = sim.snapshot()
+        self._element("particles/all/box/edges", step, time, sim.box_lengths())
+        for name, value in (("position", snap.positions), ("velocity", snap.velocities), ("angle", snap.angles),
+                            ("omega", snap.omegas), ("radius", snap.radii), ("mass", snap.masses)):
+            self._element(f"particles/all/{name}", step, time, value)
+        contacts = self._get("contacts")
+        c = snap.contacts
+        values = {"pair": np.column_stack([c.i, c.j]), "image": c.image, "status": c.status,
+                  "normal_force": c.normal_force, "tangential_force": c.tangential_force,
+                  "surface_gap": c.surface_gap, "tangential_spring": c.tangential_spring,
+                  "rolling_spring": c.rolling_spring, "rolling_distance": c.rolling_distance}
+        offset = self._get("contacts/offset")
+        start = int(offset[-1])
+        for name, _, _ in CONTACT_FIELDS:
+            dataset = self._get(f"contacts/{name}")
+            dataset.resize((start + c.count,) + dataset.shape[1:])
+            dataset[start:] = values[name]
+        _append(self._get("contacts/time"), time)
+        _append(self._get("contacts/step"), step)
+        _append(offset, start + c.count)
+        budget = snap.energy.as_dict()
+        self._element("observables/energy", step, time, [budget[k] for k in ENERGY_FIELDS])
+        self._element("observables/walls/position", step, time, sim.walls.offset)
+        self._element("observables/walls/force", step, time, sim.walls.particle_force)
+        self._element("observables/stress", step, time, sim.stress())
+        self.file.flush()
+
+    def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:
+        """Record a loading cycle (wall positions at the minimum of the load). Records wait in
+        memory and are written with the next frame or checkpoint, or on :meth:`close`."""
+        self._cycles.append((cycle, sim.step, sim.time, length_x, length_y, sim.walls.offset.copy()))
+
+    def _write_cycles(self) -> None:
+        if not self._cycles:
+            return
+        columns = list(zip(*self._cycles))
+        self._cycles = []
+        for index, name in enumerate(CYCLE_FIELDS + ("wall_position",)):
+            dataset = self._get(f"observables/cycles/{name}")
+            n = dataset.shape[0]
+            values = np.array(columns[index])
+            dataset.resize((n + len(values),) + dataset.shape[1:])
+            dataset[n:] = values
+        self.file.flush()
+
+    def write_contact_sample(self, sim: Simulation) -> None:
+        """Append (F_n, F_t, status) of the watched pairs (zeros and status 0 when not interacting)."""
+        fn, ft, status = watched_contacts(sim, self.watch)
+        _append(self._get("observables/contact_paths/normal_force"), fn)
+        _append(self._get("observables/contact_paths/tangential_force"), ft)
+        _append(self._get("observables/contact_paths/status"), status)
+        _append(self._get("observables/contact_paths/time"), sim.time)
+        self.file.flush()
+
+    def write_checkpoint(self, sim: Simulation) -> None:
+        """Write the full state into the older slot, then mark it valid; flush."""
+        self._write_cycles()
+        group = self.file["checkpoint"]
+        valid = group["valid"][...]
+        slot = 1 - int(valid[0]) if valid[0] >= 0 else 0
+        g = group[f"slot{slot}"]
+        for key, value in sim.export_state().items():
+            dataset = g[key]
+            if key.startswith("contacts/"):
+                dataset.resize((value.shape[0],) + dataset.shape[1:])
+            dataset[...] = value
+        self.file.flush()
+        group["valid"][...] = [slot, sim.step]
+        self.file.flush()
+
+    def close(self) -> None:
+        if self.file.id.valid:
+            self._write_cycles()
+            self.file.close()
+
+    def __enter__(self) -> "RunWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def watched_contacts(sim: Simulation, pairs: list[tuple[int, int]]):
+    """(F_n, F_t, status) of the rows of ``sim``'s contact table for ``pairs`` (zeros if absent)."""
+    table = sim.contacts
+    rows = table.count
+    lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(table.particle_i[:rows], table.particle_j[:rows]))}
+    fn = np.zeros(len(pairs))
+    ft = np.zeros(len(pairs))
+    status = np.zeros(len(pairs), dtype=np.int8)
+    for index, (i, j) in enumerate(pairs):
+        k = lookup.get((min(i, j), max(i, j)) if j < sim.particles.count else (i, j))
+        if k is not None:
+            fn[index] = table.normal_force[k]
+            ft[index] = table.tangential_force[k]
+            status[index] = table.status[k]
+    return fn, ft, status
+
+
+# ---------------------------------------------------------------------------------------------- reading
+def open_run(path: str | Path) -> h5py.File:
+    """Open a run file for reading (SWMR first, so a file whose writer died still opens)."""
+    path = Path(path)
+    if not path.is_file():
+        raise RunFileError(f"run file {str(path)!r} does not exist")
+    try:
+        return h5py.File(path, "r", libver="latest", swmr=True)
+    except OSError:
+        pass
+    try:
+        return h5py.File(path, "r")
+    except OSError as error:
+        raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
+
+
+def frame_count(f: h5py.File) -> int:
+    """Complete frames: the fewest frames any time-dependent particle element holds."""
+    if "particles/all/position" not in f:
+        raise RunFileError(f"{f.filename!r} has no /particles/all/position: not an H5MD particle file")
+    counts = []
+    for name in f["particles/all"]:
+        element = f["particles/all"][name]
+        if isinstance(element, h5py.Group) and "value" in element:
+            counts.extend(element[k].shape[0] for k in ("step", "time", "value"))
+    if "contacts/offset" in f:
+        counts.append(f["contacts/offset"].shape[0] - 1)
+    return min(counts)
+
+
+def read_frame(f: h5py.File, index: int) -> dict:
+    """Positions, velocities, radii, ... of frame ``index`` (negative counts from the end)."""
+    count = frame_count(f)
+    if count == 0:
+        raise RunFileError(f"{f.filename!r} holds no complete frame")
+    if not -count <= index < count:
+        raise RunFileError(f"frame {index} is out of range: {f.filename!r} holds frames 0..{count - 1}")
+    index %= count
+    particles = f["particles/all"]
+    frame = {"index": index, "step": int(particles["position/step"][index]),
+             "time": float(particles["position/time"][index])}
+    for name in particles:
+        element = particles[name]
+        if isinstance(element, h5py.Group) and "value" in element:
+            frame[name] = element["value"][index]
+    if "box/edges" in particles:
+        frame["edges"] = particles["box/edges/value"][index]
+        frame["boundary"] = [b.decode() if isinstance(b, bytes) else str(b) for b in particles["box"].attrs["boundary"]]
+    if "contacts/offset" in f:
+        lo, hi = f["contacts/offset"][index:index + 2]
+        frame["contacts"] = {name: f["contacts"][name][lo:hi] for name, _, _ in CONTACT_FIELDS}
+    return frame
+
+
+def read_checkpoint(f: h5py.File) -> dict | None:
+    """The last valid checkpoint of a run file as a state dict (``None`` if there is none)."""
+    if "checkpoint/valid" not in f:
+        return None
+    slot, _ = f["checkpoint/valid"][...]
+    if slot < 0:
+        return None
+    group = f[f"checkpoint/slot{slot}"]
+    state = {}
+    group.visititems(lambda name, obj: state.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+    return state
+
+
+def parameters(f: h5py.File) -> dict:
+    group = f["parameters"]
+    return {key: (value.decode() if isinstance(value, bytes) else value) for key, value in group.attrs.items()}
+
+
+def resume(path: str | Path) -> tuple[Simulation, dict]:
+    """A simulation restored from the last checkpoint of a run file, and the file's protocol record."""
+    with open_run(path) as f:
+        state = read_checkpoint(f)
+        if state is None:
+            raise RunFileError(f"{str(path)!r} holds no checkpoint to resume from")
+        params = parameters(f)
+        scene = f["parameters/scene"][()]
+    law = ContactLaw(**json.loads(params["law_json"]))
+    integration = Integration(**json.loads(params["integration_json"]))
+    particles = ParticleState(state["particles/position"], state["particles/radius"], mass=state["particles/mass"],
+                              inertia=state["particles/inertia"], kind=state["particles/kind"])
+    sim = Simulation(particles, law, integration.replace(dt=float(state["dt"])),
+                     walls_from_json(params["walls_json"]), cell_from_json(params["cell_json"]),
+                     tuple(np.asarray(params["gravity"], dtype=float)), check_initial_overlap=False)
+    sim.restore_state(state)
+    record = json.loads(params["protocol_json"])
+    record["scene"] = scene.decode() if isinstance(scene, bytes) else str(scene)
+    return sim, record
+
+
+def summary(path: str | Path) -> dict:
+    """What ``granlab info`` prints: sizes, frames, times, parameters, last energies, cycles."""
+    with open_run(path) as f:
+        frames = frame_count(f)
+        info = {"run_file": str(path), "frames": frames}
+        if "h5md" in f:
+            info["h5md_version"] = [int(v) for v in f["h5md"].attrs["version"]]
+            info["creator"] = f["h5md/creator"].attrs.get("name", "")
+        if frames:
+            first, last = read_frame(f, 0), read_frame(f, -1)
+            info.update(particles=int(last["position"].shape[0]), first_time=first["time"], last_time=last["time"],
+                        last_step=last["step"], contacts_last_frame=int(len(last.get("contacts", {}).get("status", []))))
+        if "parameters" in f:
+            params = parameters(f)
+            info["parameters"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in params.items()
+                                  if not k.endswith("_json")}
+            info["protocol"] = json.loads(params.get("protocol_json", "{}"))
+        if "observables/energy" in f and f["observables/energy/value"].shape[0]:
+            fields = [x.decode() for x in f["observables/energy"].attrs["fields"]]
+            info["energy_last"] = dict(zip(fields, map(float, f["observables/energy/value"][-1])))
+        if "observables/cycles/cycle" in f:
+            info["cycles"] = int(f["observables/cycles/cycle"].shape[0])
+        state = read_checkpoint(f)
+        info["checkpoint_step"] = None if state is None else int(state["step"])
+    return info
+

@@ -1,0 +1,194 @@
+"""Run files: H5MD layout, an independent reader, crashes, bit-identical resume, bad input."""
+
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from engine.io import h5md
+from engine.io.scene import parse_scene
+
+SCENE = """
+title = "loaded box"
+[simulation]
+steps = 4000
+gravity = [0.0, -1.0]
+[contact]
+normal_stiffness = 2e4
+tangential_stiffness = 1.5e4
+friction = 0.4
+damping_ratio = 0.3
+cohesion_force = 0.3
+cohesion_range = 0.02
+rolling_stiffness = 5.0
+rolling_friction = 0.02
+[box]
+x = [0.0, 10.0]
+y = [0.0, 25.0]
+wall_mass = 4.0
+[box.loads.top]
+base = 2.0
+amplitude = 1.0
+period = 3.0
+[[particles.gas]]
+count = 60
+radius_min = 0.35
+radius_max = 0.5
+region = [0.0, 10.0, 0.0, 20.0]
+seed = 2
+"""
+
+
+def _sim():
+    return parse_scene(SCENE).build()
+
+
+def test_layout_follows_h5md_and_a_plain_h5py_reader_rebuilds_the_state(tmp_path):
+    sim = _sim()
+    path = tmp_path / "run.h5"
+    with h5md.RunWriter(path, sim, scene=SCENE, protocol={"test": True}, watch=[(0, 1)]) as writer:
+        for _ in range(3):
+            sim.run(500)
+            writer.write_frame(sim)
+            writer.write_contact_sample(sim)
+        writer.write_checkpoint(sim)
+    snap = sim.snapshot()
+    # an independent reader: only h5py and the documented layout
+    with h5py.File(path, "r", libver="latest", swmr=True) as f:
+        assert list(f["h5md"].attrs["version"]) == [1, 1]
+        assert f["h5md/creator"].attrs["name"] == "GranLab"
+        assert "name" in f["h5md/author"].attrs
+        box = f["particles/all/box"]
+        assert box.attrs["dimension"] == 2
+        assert [b.decode() for b in box.attrs["boundary"]] == ["none", "none"]
+        for name in ("position", "velocity", "angle", "omega", "radius", "mass", "box/edges"):
+            element = f["particles/all"][name]
+            assert set(element) == {"step", "time", "value"}
+            assert element["value"].shape[0] == element["step"].shape[0] == element["time"].shape[0] == 3
+        assert f["particles/all/position/step"][-1] == sim.step
+        np.testing.assert_array_equal(f["particles/all/position/value"][-1], snap.positions)
+        np.testing.assert_array_equal(f["particles/all/velocity/value"][-1], snap.velocities)
+        np.testing.assert_array_equal(f["particles/all/radius/value"][-1], snap.radii)
+        np.testing.assert_array_equal(f["particles/all/omega/value"][-1], snap.omegas)
+        lo, hi = f["contacts/offset"][-2:]
+        pairs = f["contacts/pair"][lo:hi]
+        np.testing.assert_array_equal(pairs[:, 0], snap.contacts.i)
+        np.testing.assert_array_equal(f["contacts/normal_force"][lo:hi], snap.contacts.normal_force)
+        fields = [x.decode() for x in f["observables/energy"].attrs["fields"]]
+        energy = dict(zip(fields, f["observables/energy/value"][-1]))
+        assert energy["balance"] == pytest.approx(snap.energy.balance)
+        walls = [x.decode() for x in f["observables/walls"].attrs["names"]]
+        assert walls == ["left", "right", "bottom", "top"]
+        assert f["observables/contact_paths/normal_force"].shape == (3, 1)
+        assert f["parameters"].attrs["contact.friction"] == 0.4
+        assert "loaded box" in f["parameters/scene"][()].decode()
+        assert f["checkpoint/valid"][1] == sim.step
+
+
+WRITER = textwrap.dedent("""
+    import sys
+    from engine.io import h5md
+    from engine.io.scene import parse_scene
+    sys.path.insert(0, {tests!r})
+    from test_h5md import SCENE
+    sim = parse_scene(SCENE).build()
+    writer = h5md.RunWriter({path!r}, sim, scene=SCENE)
+    print("ready", flush=True)
+    while True:
+        sim.run(5)
+        writer.write_frame(sim)
+        writer.write_checkpoint(sim)
+""")
+
+
+def test_a_writer_killed_mid_run_leaves_a_readable_file(tmp_path):
+    path = tmp_path / "crash.h5"
+    script = WRITER.format(tests=str(Path(__file__).parent), path=str(path))
+    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert process.stdout.readline().strip() == "ready"
+    time.sleep(2.0)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    with h5md.open_run(path) as f:
+        frames = h5md.frame_count(f)
+        assert frames >= 2
+        last = h5md.read_frame(f, -1)
+        assert np.all(np.isfinite(last["position"]))
+        assert last["step"] == 5 * frames
+        state = h5md.read_checkpoint(f)
+        assert state is not None and state["step"] >= 5 * (frames - 1)
+    resumed, _ = h5md.resume(path)
+    resumed.run(10)
+
+
+def test_resume_matches_an_uninterrupted_run_bit_for_bit(tmp_path):
+    whole = _sim()
+    whole.run(4000)
+    part = _sim()
+    part.run(1700)
+    with h5md.RunWriter(tmp_path / "half.h5", part, scene=SCENE) as writer:
+        writer.write_frame(part)
+        writer.write_checkpoint(part)
+    resumed, record = h5md.resume(tmp_path / "half.h5")
+    assert "loaded box" in record["scene"]
+    resumed.run(2300)
+    np.testing.assert_array_equal(resumed.particles.position, whole.particles.position)
+    np.testing.assert_array_equal(resumed.particles.omega, whole.particles.omega)
+    np.testing.assert_array_equal(resumed.walls.offset, whole.walls.offset)
+    assert resumed.time == whole.time
+    assert resumed.energy().balance == whole.energy().balance
+
+
+def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
+    scene_file = tmp_path / "box.toml"
+    scene_file.write_text(SCENE)
+
+    def cli(*args):
+        process = subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True,
+                                 timeout=600)
+        assert process.returncode == 0, process.stderr
+        return json.loads(process.stdout)
+
+    whole = cli("run", str(scene_file), "--json", "--out", str(tmp_path / "whole.h5"))
+    part = _sim()
+    part.run(2500)
+    with h5md.RunWriter(tmp_path / "part.h5", part, scene=SCENE) as writer:
+        writer.write_checkpoint(part)
+    resumed = cli("run", "--resume", str(tmp_path / "part.h5"), "--json")
+    assert resumed["steps"] == whole["steps"] == 4000
+    assert resumed["positions"] == whole["positions"]
+    assert resumed["run_file"].endswith("part-resumed.h5")
+    info = cli("info", str(tmp_path / "whole.h5"), "--json")
+    assert info["frames"] == 2 and info["particles"] == 60 and info["checkpoint_step"] == 4000
+
+
+def test_bad_run_files_give_clear_errors(tmp_path):
+    with pytest.raises(h5md.RunFileError, match="does not exist"):
+        h5md.open_run(tmp_path / "missing.h5")
+    text = tmp_path / "notes.h5"
+    text.write_text("not an HDF5 file")
+    with pytest.raises(h5md.RunFileError, match="is not a readable HDF5 file"):
+        h5md.open_run(text)
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.create_dataset("x", data=[1, 2, 3])
+    with h5md.open_run(other) as f:
+        with pytest.raises(h5md.RunFileError, match="not an H5MD particle file"):
+            h5md.frame_count(f)
+    with pytest.raises(h5md.RunFileError, match="holds no checkpoint"):
+        sim = _sim()
+        with h5md.RunWriter(tmp_path / "nockpt.h5", sim) as writer:
+            writer.write_frame(sim)
+        h5md.resume(tmp_path / "nockpt.h5")
+    with h5md.open_run(tmp_path / "nockpt.h5") as f:
+        with pytest.raises(h5md.RunFileError, match=r"frame 5 is out of range: .* holds frames 0..0"):
+            h5md.read_frame(f, 5)
+    process = subprocess.run([sys.executable, "-m", "engine.cli", "info", str(text)], capture_output=True, text=True)
+    assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
