@@ -4,7 +4,10 @@
   the built-in ``default`` scene) and print a summary or one JSON object;
 - ``granlab experiment NAME [--model M] [--zeta Z] [--mu MU] [--dt DT] [--json]``: a teaching
   experiment (collision, closed-path, block) against its formula;
-- ``granlab bench [--steps S] [--json]``: particle-steps per second on the LAMMPS reference system.
+- ``granlab bench [--steps S] [--json]``: particle-steps per second on the LAMMPS reference system;
+- ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
+- ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
+- ``granlab info RUNFILE [--json]``: what a run file holds.
 
 Errors print one line naming what is wrong and exit with status 2.
 """
@@ -16,6 +19,7 @@ import json
 import math
 import sys
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -48,41 +52,62 @@ def _clean(value):
     return value
 
 
-def run_scene(name: str) -> dict:
-    """Run a scene to its end; returns the final state, energy budget and recorded series."""
-    from .io.scene import load_scene
+def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
+              resume: str | None = None) -> dict:
+    """Run a scene to its end (or continue a run file from its checkpoint); returns the final
+    state, energy budget and recorded series. With ``out`` a run file gets a frame every
+    ``frame_every`` steps (default: the scene's ``record_every``) and a checkpoint at the end."""
+    from .io import h5md
+    from .io.scene import load_scene, parse_scene
 
-    scene = load_scene(name)
-    if scene.threads:
-        numba.set_num_threads(min(scene.threads, numba.config.NUMBA_NUM_THREADS))
     start = time.perf_counter()
-    sim = scene.build()
-    total = scene.step_count(sim.dt)
+    if resume is not None:
+        sim, record = h5md.resume(resume)
+        scene = parse_scene(record["scene"], origin=f"scene stored in {resume}")
+        total = max(0, scene.step_count(sim.dt) - sim.step)
+        if out is None:
+            out = str(Path(resume).with_name(Path(resume).stem + "-resumed.h5"))
+    else:
+        scene = load_scene(name)
+        if scene.threads:
+            numba.set_num_threads(min(scene.threads, numba.config.NUMBA_NUM_THREADS))
+        sim = scene.build()
+        total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
+    every = frame_every or scene.record_every or total or 1
+    writer = h5md.RunWriter(out, sim, scene=scene.source, protocol={"command": "run", "scene": scene.title}) \
+        if out else None
 
     def record():
         budget = sim.energy()
         series["time"].append(sim.time)
         for key in ("kinetic", "stored", "dissipated", "balance"):
             series[key].append(getattr(budget, key))
+        if writer is not None:
+            writer.write_frame(sim)
 
-    every = scene.record_every or total
-    record()
-    done = 0
-    while done < total:
-        block = min(every, total - done)
-        sim.run(block)
-        done += block
+    try:
         record()
+        done = 0
+        while done < total:
+            block = min(every, total - done)
+            sim.run(block)
+            done += block
+            record()
+        if writer is not None:
+            writer.write_checkpoint(sim)
+    finally:
+        if writer is not None:
+            writer.close()
     wall = time.perf_counter() - start
     snap = sim.snapshot()
     return {
         "title": scene.title, "particles": sim.particles.count, "steps": sim.step, "time": sim.time, "dt": sim.dt,
-        "wall_time_s": wall, "particle_steps_per_s": sim.particles.count * sim.step / wall if wall > 0 else None,
+        "wall_time_s": wall, "particle_steps_per_s": sim.particles.count * done / wall if wall > 0 else None,
         "positions": snap.positions, "velocities": snap.velocities, "omegas": snap.omegas, "angles": snap.angles,
         "energy": snap.energy.as_dict(), "contacts": snap.contacts.count, "status_counts": sim.status_counts(),
         "wall_names": list(snap.wall_names), "wall_forces": snap.wall_forces, "cell_lengths": snap.cell_lengths,
-        "series": series,
+        "series": series, "run_file": out,
     }
 
 
@@ -99,6 +124,8 @@ def _print_run(result: dict) -> None:
     drift = energy["balance"] - first
     scale = max(abs(first), 1e-300)
     print(f"  energy balance: {energy['balance']:.6g} (drift {drift:.3g}, {drift / scale:.2e} relative)")
+    if result["run_file"]:
+        print(f"  run file: {result['run_file']}")
 
 
 def _experiment(args) -> dict:
@@ -150,14 +177,126 @@ def _print_bench(result: dict) -> None:
           f"(speed-up {result['speedup']:.2f})")
 
 
+def _prepare(args) -> dict:
+    from .analysis.packing import packing_stats
+    from .io.h5md import RunWriter
+    from .protocols import prepare
+
+    if args.method == "compress":
+        prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
+                                    friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0)
+    else:
+        law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
+                                   cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
+                                   pressure=args.pressure)
+        common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
+                      seed=args.seed)
+        if args.method == "1":
+            prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
+        else:
+            prepared = prepare.method2(speed=args.speed, accelerated=args.accelerated,
+                                       max_time=args.max_time or 4000.0, **common)
+    sim = prepared.sim
+    stats = packing_stats(sim.snapshot(), prepared.report.force_scale)
+    run_file = args.out
+    if run_file:
+        with RunWriter(run_file, sim, protocol={"command": "prepare", **{k: v for k, v in vars(args).items()
+                                                                          if k not in ("handler", "printer")}}) as w:
+            w.write_frame(sim)
+            w.write_checkpoint(sim)
+    return {"method": args.method, "particles": sim.particles.count, "phi": stats.phi, "z": stats.z,
+            "z_star": stats.z_star, "rattlers": stats.rattlers, "equilibrated": prepared.equilibrated,
+            "sim_time": prepared.sim_time, "wall_time_s": prepared.wall_time_s, "run_file": run_file,
+            "pressure": prepared.pressure, "measured_pressure": prepared.report.measured_pressure,
+            "equilibrium": prepared.report.as_dict()}
+
+
+def _print_prepare(result: dict) -> None:
+    state = "in equilibrium" if result["equilibrated"] else "NOT in equilibrium (time limit reached)"
+    print(f"method {result['method']}: {result['particles']} disks {state} after t = {result['sim_time']:.4g} "
+          f"({result['wall_time_s']:.2f} s)")
+    print(f"  solid fraction {result['phi']:.4f}, coordination z = {result['z']:.3f} (z* = {result['z_star']:.3f}), "
+          f"{result['rattlers']} rattlers; pressure {result['measured_pressure']:.6g} (imposed {result['pressure']:.6g})")
+    if result["run_file"]:
+        print(f"  run file: {result['run_file']}")
+
+
+def _study(args) -> dict:
+    from .params import TANGENTIAL_MODELS
+    from .studies import RatchetStudy, run_ratchet_study, text_progress
+
+    models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
+    study = RatchetStudy(particles=args.particles, samples=args.samples, cycles=args.cycles, models=models,
+                         amplitude=args.amplitude, period=args.period,
+                         phase=None if args.phase is None else math.radians(args.phase),
+                         friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
+                         gravity=args.gravity, first_seed=args.seed)
+    progress = None if args.json else text_progress
+    return run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress)
+
+
+def _print_study(result: dict) -> None:
+    settings = result["settings"]
+    print(f"ratchet study: {settings['samples']} samples of {settings['particles']} disks, {settings['cycles']} cycles, "
+          f"{result['wall_time_s']:.1f} s on {result['scheduler']}")
+    for model, data in result["models"].items():
+        print(f"  {model}: {data['ratcheting']}/{data['completed']} ratcheting", end="")
+        if data["geomean_abs_dgamma"]:
+            low, high = data["range_abs_dgamma"]
+            print(f"; |dgamma| geometric mean {data['geomean_abs_dgamma']:.3g}, range {low:.3g}..{high:.3g}; "
+                  f"{data['positive']} positive, {data['negative']} negative", end="")
+        print(f"; {data['shakedown']} shakedown, {data['with_outliers']} with outliers")
+        for sample in data["samples"]:
+            if sample["error"]:
+                print(f"    seed {sample['seed']} failed: {sample['error']}")
+    for failure in result["failed"]:
+        print(f"  failed: seed {failure['seed']} ({failure['model']}): {failure['error']}")
+
+
+def _info(args) -> dict:
+    from .io.h5md import summary
+
+    return summary(args.runfile)
+
+
+def _print_info(result: dict) -> None:
+    print(f"{result['run_file']}: H5MD {'.'.join(map(str, result.get('h5md_version', [])))} "
+          f"by {result.get('creator', '?')}")
+    print(f"  {result.get('particles', '?')} disks, {result['frames']} complete frames"
+          + (f", t = {result['first_time']:.6g} .. {result['last_time']:.6g} (step {result['last_step']})"
+             if result["frames"] else ""))
+    if "cycles" in result:
+        print(f"  {result['cycles']} cycle records")
+    print(f"  checkpoint: {'step ' + str(result['checkpoint_step']) if result['checkpoint_step'] is not None else 'none'}")
+    if "energy_last" in result:
+        e = result["energy_last"]
+        print(f"  last energies: kinetic {e['kinetic']:.6g}, stored {e['stored']:.6g}, balance {e['balance']:.6g}")
+    if result.get("protocol"):
+        print(f"  protocol: {json.dumps(_clean(result['protocol']))}")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: a whole number > 0")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="granlab", description="GranLab: 2D granular mechanics lab")
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="run a TOML scene (a path or a built-in name)")
     run.add_argument("scene", nargs="?", default="default", help="scene file or built-in name (default: default)")
+    run.add_argument("--out", help="write a run file (HDF5, H5MD)")
+    run.add_argument("--frame-every", type=_positive_int, help="steps between frames (default: record_every)")
+    run.add_argument("--resume", metavar="RUNFILE", help="continue a run file from its checkpoint to the end of its scene")
     run.add_argument("--json", action="store_true", help="print one JSON object")
-    run.set_defaults(handler=lambda a: run_scene(a.scene), printer=_print_run)
+    run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume),
+                     printer=_print_run)
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")
     experiment.add_argument("name", choices=("collision", "closed-path", "block"))
@@ -174,7 +313,60 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench, printer=_print_bench)
+
+    prepare = commands.add_parser("prepare", help="prepare a packing in equilibrium")
+    prepare.add_argument("--method", required=True, choices=("compress", "1", "2"),
+                         help="compress: ratcheting biaxial box; 1, 2: Gilabert's methods")
+    prepare.add_argument("--particles", type=_positive_int, default=None, help="number of disks")
+    prepare.add_argument("--seed", type=int, default=0)
+    prepare.add_argument("--pressure", type=_float, default=None,
+                         help="P (compress: P0 = 1 in paper units; Gilabert: P* a F0 or P with kappa = K_N/P)")
+    prepare.add_argument("--mu", type=_float, help="friction (compress: switched on after compression, 0.2)")
+    prepare.add_argument("--solid-fraction", type=_float, default=0.36, help="initial gas fraction Phi_I (1, 2)")
+    prepare.add_argument("--kappa", type=_float, default=1e5, help="stiffness parameter kappa (1, 2)")
+    prepare.add_argument("--cohesive", action="store_true", help="method 1 with cohesion (method 2 always is)")
+    prepare.add_argument("--rolling", action="store_true", help="rolling resistance (Gilabert Table I)")
+    prepare.add_argument("--speed", type=_float, help="V0 of method 2 (default V* = sqrt(F0 D0))")
+    prepare.add_argument("--accelerated", action="store_true", help="method 2 series B: soft, then stiffened")
+    prepare.add_argument("--max-time", type=_float, help="simulated-time limit of each stage")
+    prepare.add_argument("--out", help="write the packing to a run file")
+    prepare.add_argument("--json", action="store_true", help="print one JSON object")
+    prepare.set_defaults(handler=_prepare_with_defaults, printer=_print_prepare)
+
+    study = commands.add_parser("study", help="studies of many samples on Dask")
+    kinds = study.add_subparsers(dest="kind", required=True)
+    ratchet = kinds.add_parser("ratchet", help="cyclic loading of biaxial boxes (ratcheting Sec. IV B)")
+    ratchet.add_argument("--particles", type=_positive_int, default=16)
+    ratchet.add_argument("--samples", type=_positive_int, default=10)
+    ratchet.add_argument("--cycles", type=_positive_int, default=100)
+    ratchet.add_argument("--model", default="cundall-strack", choices=("cundall-strack", "alpha", "angle", "all"))
+    ratchet.add_argument("--phase", type=_float, help="elliptic loading with this phase (degrees; Eqs. 4-5)")
+    ratchet.add_argument("--mu", type=_float, default=0.2, help="friction during cycling (inf: no sliding)")
+    ratchet.add_argument("--dt-factor", type=_float, default=0.2, help="dt = f sqrt(m_min / K_n) (default 0.2)")
+    ratchet.add_argument("--amplitude", type=_float, default=0.2, help="Delta sigma in units of P0 (default 0.2)")
+    ratchet.add_argument("--period", type=_float, default=10.0, help="cycle period in tau (default 10)")
+    ratchet.add_argument("--reference-cycle", type=int, default=30, help="cycle defining L0 (default 30)")
+    ratchet.add_argument("--gravity", type=_float, default=0.0, help="weak gravity (Sec. IV B 3)")
+    ratchet.add_argument("--seed", type=int, default=0, help="first seed")
+    ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
+    ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
+    ratchet.add_argument("--json", action="store_true", help="print one JSON object")
+    ratchet.set_defaults(handler=_study, printer=_print_study)
+
+    info = commands.add_parser("info", help="summarise a run file")
+    info.add_argument("runfile")
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    info.set_defaults(handler=_info, printer=_print_info)
     return parser
+
+
+def _prepare_with_defaults(args) -> dict:
+    defaults = {"compress": (16, 1.0), "1": (200, 1e-2), "2": (200, 1e-2)}[args.method]
+    if args.particles is None:
+        args.particles = defaults[0]
+    if args.pressure is None:
+        args.pressure = defaults[1]
+    return _prepare(args)
 
 
 def main(argv: list[str] | None = None) -> int:

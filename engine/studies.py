@@ -1,0 +1,206 @@
+"""Studies of many samples on Dask: the ratchet study of McNamara, García-Rojo & Herrmann (Sec. IV B).
+
+Each sample is prepared once (:func:`engine.protocols.prepare.compress`) and then cycled with
+each requested tangential model, writing one run file per model and sample. Samples run in
+parallel on a dask.distributed cluster: a local one on all cores (one single-threaded worker
+process per core), or an existing one given by its scheduler address.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .analysis.ratchet import deviatoric_strain, ratchet_verdict
+from .errors import GranLabError, ParameterError
+from .io.h5md import RunWriter
+from .params import TANGENTIAL_MODELS, nonnegative, positive
+from .protocols.cyclic import CyclicLoad, run_cycles
+from .protocols.prepare import compress
+
+
+@dataclass(frozen=True)
+class RatchetStudy:
+    """The settings of a ratchet study (paper units: box L = 1, pressure p = 1, density 1).
+
+    ``dt_factor`` sets ``dt = dt_factor sqrt(m_min / K_n)`` (ratcheting Fig. 14); ``phase`` turns
+    on elliptic loading (Eqs. 4-5); ``gravity`` is the weak gravity of Sec. IV B 3. Run files get
+    every cycle's record and a frame every ``frame_every`` cycles (and at the reference cycle).
+    """
+
+    particles: int = 16
+    samples: int = 10
+    cycles: int = 100
+    models: tuple[str, ...] = ("cundall-strack",)
+    amplitude: float = 0.2
+    period: float = 10.0
+    phase: float | None = None
+    friction: float = 0.2
+    dt_factor: float = 0.2
+    reference_cycle: int = 30
+    gravity: float = 0.0
+    first_seed: int = 0
+    normal_model: str = "linear"
+    frame_every: int = 10
+
+    def __post_init__(self):
+        for name in ("particles", "samples", "cycles"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+                raise ParameterError(name, value, "a whole number > 0")
+        for model in self.models:
+            if model not in TANGENTIAL_MODELS:
+                raise ParameterError("model", model, "one of " + ", ".join(TANGENTIAL_MODELS) + " or all")
+        if not 0 <= self.reference_cycle <= self.cycles - 3:
+            raise ParameterError("reference_cycle", self.reference_cycle,
+                                 f"a cycle from 0 to cycles - 3 = {self.cycles - 3} (3 cycles at least are fitted)")
+        positive("dt_factor", self.dt_factor)
+        nonnegative("friction", self.friction, allow_inf=True)
+        positive("amplitude", self.amplitude)
+        positive("period", self.period)
+        nonnegative("gravity", self.gravity)
+
+
+def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None) -> list[dict]:
+    """Prepare sample ``seed``, cycle it with each model; one result (or error) per model."""
+    results = []
+    try:
+        prepared = compress(study.particles, seed=seed, pressure=1.0, friction=study.friction,
+                            normal_model=study.normal_model)
+    except Exception as error:  # reported per sample: the others go on
+        return [_failure(study, seed, model, error) for model in study.models]
+    base = prepared.sim
+    for model in study.models:
+        start = time.perf_counter()
+        try:
+            sim = base.clone(tangential_model=model)
+            sim.set_dt(study.dt_factor * math.sqrt(float(sim.particles.mass.min()) / sim.law.normal_stiffness))
+            if study.gravity:
+                sim.set_gravity(0.0, -study.gravity)
+            load = CyclicLoad(pressure=1.0, amplitude=study.amplitude, period=study.period, phase=study.phase)
+            run_file = None
+            writer = None
+            if out_dir is not None:
+                run_file = str(Path(out_dir) / f"ratchet_{model}_seed{seed}.h5")
+                writer = RunWriter(run_file, sim, protocol={"study": "ratchet", "seed": seed, "model": model,
+                                                            **study.__dict__})
+            try:
+                def on_cycle(cycle, s, lx, ly):
+                    if writer is not None:
+                        writer.write_cycle(cycle, s, lx, ly)
+                        if cycle % study.frame_every == 0 or cycle in (study.reference_cycle, study.cycles):
+                            writer.write_frame(s)
+                series = run_cycles(sim, load, study.cycles, on_cycle=on_cycle)
+                if writer is not None:
+                    writer.write_checkpoint(sim)
+            finally:
+                if writer is not None:
+                    writer.close()
+            cycles, lx, ly = series.arrays()
+            ref = study.reference_cycle
+            gamma = deviatoric_strain(lx[ref:], ly[ref:], lx[ref], ly[ref])
+            verdict = ratchet_verdict(cycles[ref:], gamma)
+            results.append({"seed": seed, "model": model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
+                            "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,
+                            "outlier_cycles": verdict.outlier_cycles, "equilibrated": prepared.equilibrated,
+                            "run_file": run_file, "wall_time_s": time.perf_counter() - start, "error": None})
+        except Exception as error:  # reported per sample: the others go on
+            results.append(_failure(study, seed, model, error))
+    return results
+
+
+def _failure(study, seed, model, error) -> dict:
+    return {"seed": seed, "model": model, "dgamma": None, "ratcheting": None, "error": f"{type(error).__name__}: {error}",
+            "traceback": traceback.format_exc(limit=3)}
+
+
+def summarize(study: RatchetStudy, results: list[dict]) -> dict:
+    """Per model: fraction ratcheting, geometric mean and range of |dgamma| over the ratcheting
+    samples, count of each sign, and the samples."""
+    models = {}
+    for model in study.models:
+        rows = sorted((r for r in results if r["model"] == model), key=lambda r: r["seed"])
+        done = [r for r in rows if r["error"] is None]
+        ratcheting = [r for r in done if r["ratcheting"]]
+        magnitudes = np.array([abs(r["dgamma"]) for r in ratcheting if r["dgamma"] != 0])
+        models[model] = {
+            "fraction_ratcheting": len(ratcheting) / len(done) if done else None,
+            "ratcheting": len(ratcheting),
+            "completed": len(done),
+            "geomean_abs_dgamma": float(np.exp(np.mean(np.log(magnitudes)))) if magnitudes.size else None,
+            "range_abs_dgamma": [float(magnitudes.min()), float(magnitudes.max())] if magnitudes.size else None,
+            "positive": sum(1 for r in ratcheting if r["dgamma"] > 0),
+            "negative": sum(1 for r in ratcheting if r["dgamma"] < 0),
+            "shakedown": sum(1 for r in done if r.get("shakedown")),
+            "with_outliers": sum(1 for r in done if r.get("outlier_cycles")),
+            "samples": [{k: r.get(k) for k in ("seed", "dgamma", "ratcheting", "rms_deviation", "shakedown",
+                                                "outlier_cycles", "run_file", "error")} for r in rows],
+        }
+    failed = [{"seed": r["seed"], "model": r["model"], "error": r["error"]} for r in results if r["error"]]
+    return {"study": "ratchet", "settings": {k: v for k, v in study.__dict__.items()}, "models": models,
+            "failed": failed}
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel a sample needs, before workers start."""
+    ratchet_sample(RatchetStudy(particles=4, samples=1, cycles=3, reference_cycle=0, period=0.5,
+                                models=TANGENTIAL_MODELS), 0, None)
+
+
+def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir: str | None = None,
+                      progress=None, workers: int | None = None) -> dict:
+    """Run every sample on Dask and summarise. ``progress(done, total)`` is called as samples finish."""
+    from distributed import Client, LocalCluster, as_completed
+
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    cluster = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="5s")
+            except (OSError, TimeoutError) as error:
+                raise GranLabError(f"cannot reach the Dask scheduler at {scheduler!r}: {error}") from error
+        else:
+            warm_up()
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        with client:
+            seeds = range(study.first_seed, study.first_seed + study.samples)
+            futures = [client.submit(ratchet_sample, study, seed, out_dir, key=f"ratchet-sample-{seed}", pure=False)
+                       for seed in seeds]
+            results = []
+            for done, future in enumerate(as_completed(futures), start=1):
+                try:
+                    results.extend(future.result())
+                except Exception as error:  # a lost worker: report, go on
+                    seed = study.first_seed + futures.index(future)
+                    results.extend(_failure(study, seed, model, error) for model in study.models)
+                if progress is not None:
+                    progress(done, len(futures))
+    finally:
+        if cluster is not None:
+            cluster.close()
+    summary = summarize(study, results)
+    summary["wall_time_s"] = time.perf_counter() - start
+    summary["scheduler"] = scheduler or "local"
+    return summary
+
+
+def text_progress(done: int, total: int, stream=sys.stderr) -> None:
+    """A one-line progress bar on the terminal."""
+    width = 30
+    filled = int(width * done / total)
+    stream.write(f"\r[{'#' * filled}{' ' * (width - filled)}] {done}/{total} samples")
+    if done == total:
+        stream.write("\n")
+    stream.flush()

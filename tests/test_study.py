@@ -1,0 +1,58 @@
+"""The ratchet study on a real local Dask cluster, its failures, and its bad input."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from engine import ParameterError
+from engine.io import h5md
+from engine.studies import RatchetStudy, ratchet_sample, summarize
+
+
+def granlab(*args):
+    return subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True, timeout=900)
+
+
+def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):
+    process = granlab("study", "ratchet", "--particles", "9", "--samples", "2", "--cycles", "12", "--period", "2",
+                      "--reference-cycle", "2", "--model", "all", "--out", str(tmp_path), "--json")
+    assert process.returncode == 0, process.stderr
+    summary = json.loads(process.stdout)
+    assert summary["scheduler"] == "local"
+    assert set(summary["models"]) == {"cundall-strack", "alpha", "angle"}
+    for model, data in summary["models"].items():
+        assert data["completed"] == 2 and 0.0 <= data["fraction_ratcheting"] <= 1.0
+        assert [s["seed"] for s in data["samples"]] == [0, 1]
+        for sample in data["samples"]:
+            assert isinstance(sample["dgamma"], float) and isinstance(sample["ratcheting"], bool)
+            info = h5md.summary(sample["run_file"])
+            assert info["cycles"] == 13 and info["protocol"]["model"] == model
+    assert summary["failed"] == []
+
+
+def test_a_failing_sample_is_reported_and_does_not_stop_the_others():
+    bad = RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, dt_factor=50.0)
+    results = ratchet_sample(bad, 3, None)
+    assert results[0]["error"].startswith("ParameterError: dt = ")
+    good = ratchet_sample(RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, period=1.0), 4, None)
+    summary = summarize(RatchetStudy(particles=4, samples=2, cycles=5, reference_cycle=0), results + good)
+    data = summary["models"]["cundall-strack"]
+    assert data["completed"] == 1
+    assert summary["failed"] == [{"seed": 3, "model": "cundall-strack", "error": results[0]["error"]}]
+    assert [s["seed"] for s in data["samples"]] == [3, 4]
+
+
+def test_bad_study_input_is_refused_clearly():
+    with pytest.raises(ParameterError, match="model = 'hooke'"):
+        RatchetStudy(models=("hooke",))
+    with pytest.raises(ParameterError, match="reference_cycle = 30 is not allowed"):
+        RatchetStudy(cycles=10)
+    process = granlab("study", "ratchet", "--cycles", "0")
+    assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
+    process = granlab("study", "ratchet", "--model", "hooke")
+    assert process.returncode == 2 and "invalid choice: 'hooke'" in process.stderr
+    process = granlab("study", "ratchet", "--samples", "1", "--cycles", "5", "--reference-cycle", "0",
+                      "--scheduler", "tcp://127.0.0.1:9")
+    assert process.returncode == 2 and "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in process.stderr
