@@ -230,7 +230,7 @@ def _study(args) -> dict:
                          amplitude=args.amplitude, period=args.period,
                          phase=None if args.phase is None else math.radians(args.phase),
                          friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
-                         gravity=args.gravity, first_seed=args.seed)
+                         gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
     progress = None if args.json else text_progress
     return run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress)
 
@@ -348,6 +348,8 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--reference-cycle", type=int, default=30, help="cycle defining L0 (default 30)")
     ratchet.add_argument("--gravity", type=_float, default=0.0, help="weak gravity (Sec. IV B 3)")
     ratchet.add_argument("--seed", type=int, default=0, help="first seed")
+    ratchet.add_argument("--watch", type=int, default=0, metavar="K",
+                         help="record every contact's (F_n, F_t, status) K times per cycle in the run files")
     ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")

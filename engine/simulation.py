@@ -20,7 +20,8 @@ import numpy as np
 from .errors import DivergenceError, ParameterError
 from .kernels import integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
-                             ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, energy_terms, rolling_distance)
+                             ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, elastic_normal_forces, energy_terms,
+                             rolling_distance)
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
                            TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA)
@@ -137,6 +138,9 @@ class ContactSnapshot:
     """Interacting contacts (status != none): arrays of length M.
 
     ``j >= N`` denotes wall ``j - N``. ``status`` codes are named in ``STATUS_NAMES``.
+    ``normal_force`` is the total F_n (elastic, viscous and cohesive parts);
+    ``elastic_normal_force`` its elastic repulsive part N^e, which bounds the tangential force
+    (``|F_t| <= mu N^e``) and the rolling moment.
     """
 
     i: np.ndarray
@@ -144,6 +148,7 @@ class ContactSnapshot:
     image: np.ndarray
     status: np.ndarray
     normal_force: np.ndarray
+    elastic_normal_force: np.ndarray
     tangential_force: np.ndarray
     surface_gap: np.ndarray
     tangential_spring: np.ndarray
@@ -562,11 +567,15 @@ class Simulation:
         count = table.count
         roll = np.zeros(count)
         rolling_distance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), table.arrays(), roll)
+        elastic = np.zeros(count)
+        elastic_normal_forces(self.particles.arrays(), table.arrays(), self._law_vector, self.normal_model_code,
+                              elastic)
         rows = np.flatnonzero(table.status[:count] != STATUS_NONE)
         return ContactSnapshot(
             i=table.particle_i[rows].astype(np.int64), j=table.particle_j[rows].astype(np.int64),
             image=table.image[rows].astype(np.int64), status=table.status[rows].copy(),
-            normal_force=table.normal_force[rows].copy(), tangential_force=table.tangential_force[rows].copy(),
+            normal_force=table.normal_force[rows].copy(), elastic_normal_force=elastic[rows],
+            tangential_force=table.tangential_force[rows].copy(),
             surface_gap=table.surface_gap[rows].copy(), tangential_spring=table.tangential_spring[rows].copy(),
             rolling_spring=table.rolling_spring[rows].copy(), rolling_distance=roll[rows])
 

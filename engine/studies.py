@@ -32,7 +32,9 @@ class RatchetStudy:
 
     ``dt_factor`` sets ``dt = dt_factor sqrt(m_min / K_n)`` (ratcheting Fig. 14); ``phase`` turns
     on elliptic loading (Eqs. 4-5); ``gravity`` is the weak gravity of Sec. IV B 3. Run files get
-    every cycle's record and a frame every ``frame_every`` cycles (and at the reference cycle).
+    every cycle's record and a frame every ``frame_every`` cycles (and at the reference cycle);
+    with ``watch_samples`` > 0, the (F_n, F_t, status) of every contact present when the loading
+    starts, that many times per cycle (the Coulomb-cone paths of ratcheting Figs. 3, 4 and 6).
     """
 
     particles: int = 16
@@ -49,6 +51,7 @@ class RatchetStudy:
     first_seed: int = 0
     normal_model: str = "linear"
     frame_every: int = 10
+    watch_samples: int = 0
 
     def __post_init__(self):
         for name in ("particles", "samples", "cycles"):
@@ -89,15 +92,18 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None) -> list[
             writer = None
             if out_dir is not None:
                 run_file = str(Path(out_dir) / f"ratchet_{model}_seed{seed}.h5")
-                writer = RunWriter(run_file, sim, protocol={"study": "ratchet", "seed": seed, "model": model,
-                                                            **study.__dict__})
+                watch = touching_pairs(sim) if study.watch_samples else []
+                writer = RunWriter(run_file, sim, watch=watch,
+                                   protocol={"study": "ratchet", "seed": seed, "model": model, **study.__dict__})
             try:
                 def on_cycle(cycle, s, lx, ly):
                     if writer is not None:
                         writer.write_cycle(cycle, s, lx, ly)
                         if cycle % study.frame_every == 0 or cycle in (study.reference_cycle, study.cycles):
                             writer.write_frame(s)
-                series = run_cycles(sim, load, study.cycles, on_cycle=on_cycle)
+                series = run_cycles(sim, load, study.cycles, on_cycle=on_cycle,
+                                    samples_per_cycle=study.watch_samples if writer is not None else 0,
+                                    on_sample=writer.write_contact_sample if writer is not None else None)
                 if writer is not None:
                     writer.write_checkpoint(sim)
             finally:
@@ -114,6 +120,13 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None) -> list[
         except Exception as error:  # reported per sample: the others go on
             results.append(_failure(study, seed, model, error))
     return results
+
+
+def touching_pairs(sim) -> list[tuple[int, int]]:
+    """The (i, j) of every touching contact (j >= N: a wall)."""
+    snapshot = sim.contact_snapshot()
+    touching = snapshot.surface_gap < 0
+    return [(int(i), int(j)) for i, j in zip(snapshot.i[touching], snapshot.j[touching])]
 
 
 def _failure(study, seed, model, error) -> dict:

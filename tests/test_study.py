@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from engine import ParameterError
@@ -56,3 +57,22 @@ def test_bad_study_input_is_refused_clearly():
     process = granlab("study", "ratchet", "--samples", "1", "--cycles", "5", "--reference-cycle", "0",
                       "--scheduler", "tcp://127.0.0.1:9")
     assert process.returncode == 2 and "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in process.stderr
+
+
+def test_watched_contacts_trace_paths_inside_the_coulomb_cone(tmp_path):
+    # ratcheting Figs. 3-4: every sample of every watched contact lies in |F_t| <= mu N^e
+    study = RatchetStudy(particles=16, samples=1, cycles=6, reference_cycle=0, watch_samples=25)
+    result = ratchet_sample(study, 1, str(tmp_path))[0]
+    import h5py
+    with h5py.File(result["run_file"], "r", libver="latest", swmr=True) as f:
+        paths = f["observables/contact_paths"]
+        fn, ft, status = paths["elastic_normal_force"][()], paths["tangential_force"][()], paths["status"][()]
+        assert paths["pair"].shape[0] == fn.shape[1] > 20
+        assert fn.shape[0] == 6 * 25
+    touching = np.isin(status, (1, 2, 3))
+    assert touching.mean() > 0.9
+    assert np.all(np.abs(ft[touching]) <= 0.2 * fn[touching] * (1 + 1e-12))
+    sliding = np.isin(status, (2, 3))
+    assert sliding.any()
+    assert np.all(np.sign(ft[status == 2]) > 0) and np.all(np.sign(ft[status == 3]) < 0)
+    np.testing.assert_allclose(np.abs(ft[sliding]), 0.2 * fn[sliding], rtol=1e-12)

@@ -38,7 +38,8 @@ ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balan
                  "dissipated_sliding", "dissipated_rolling", "dissipated_opening", "work_walls", "work_cell",
                  "work_prescribed", "work_external")
 CONTACT_FIELDS = (("pair", np.int32, (2,)), ("image", np.int8, (2,)), ("status", np.int8, ()),
-                  ("normal_force", np.float64, ()), ("tangential_force", np.float64, ()),
+                  ("normal_force", np.float64, ()), ("elastic_normal_force", np.float64, ()),
+                  ("tangential_force", np.float64, ()),
                   ("surface_gap", np.float64, ()), ("tangential_spring", np.float64, ()),
                   ("rolling_spring", np.float64, ()), ("rolling_distance", np.float64, ()))
 CYCLE_FIELDS = ("cycle", "step", "time", "length_x", "length_y")
@@ -156,7 +157,8 @@ class RunWriter:
         paths.create_dataset("pair", data=np.array(watch or [], dtype=np.int64).reshape(-1, 2))
         n_watch = len(watch or [])
         _extendable(paths, "time", (), np.float64, 256)
-        for name, dtype in (("normal_force", np.float64), ("tangential_force", np.float64), ("status", np.int8)):
+        for name, dtype in (("normal_force", np.float64), ("elastic_normal_force", np.float64),
+                            ("tangential_force", np.float64), ("status", np.int8)):
             paths.create_dataset(name, shape=(0, n_watch), maxshape=(None, None), dtype=dtype,
                                  chunks=(256, max(1, n_watch)))
         self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
@@ -165,6 +167,7 @@ class RunWriter:
         self.watch = list(watch or [])
         self._handles = {}
         self._cycles = []
+        self._samples = []
 
     # ------------------------------------------------------------------ creation
     @staticmethod
@@ -222,7 +225,8 @@ class RunWriter:
         contacts = self._get("contacts")
         c = snap.contacts
         values = {"pair": np.column_stack([c.i, c.j]), "image": c.image, "status": c.status,
-                  "normal_force": c.normal_force, "tangential_force": c.tangential_force,
+                  "normal_force": c.normal_force, "elastic_normal_force": c.elastic_normal_force,
+                  "tangential_force": c.tangential_force,
                   "surface_gap": c.surface_gap, "tangential_spring": c.tangential_spring,
                   "rolling_spring": c.rolling_spring, "rolling_distance": c.rolling_distance}
         offset = self._get("contacts/offset")
@@ -243,30 +247,37 @@ class RunWriter:
 
     def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:
         """Record a loading cycle (wall positions at the minimum of the load). Records wait in
-        memory and are written with the next frame or checkpoint, or on :meth:`close`."""
+        memory and are written with the next frame or checkpoint, on :meth:`close`, or every
+        100 records."""
         self._cycles.append((cycle, sim.step, sim.time, length_x, length_y, sim.walls.offset.copy()))
+        if len(self._cycles) >= 100:
+            self._write_cycles()
 
     def _write_cycles(self) -> None:
-        if not self._cycles:
-            return
-        columns = list(zip(*self._cycles))
-        self._cycles = []
-        for index, name in enumerate(CYCLE_FIELDS + ("wall_position",)):
-            dataset = self._get(f"observables/cycles/{name}")
-            n = dataset.shape[0]
-            values = np.array(columns[index])
-            dataset.resize((n + len(values),) + dataset.shape[1:])
-            dataset[n:] = values
+        """Write the cycle records and contact samples waiting in memory; flush."""
+        for group, names, pending in (
+                ("observables/cycles", CYCLE_FIELDS + ("wall_position",), self._cycles),
+                ("observables/contact_paths", ("time", "normal_force", "elastic_normal_force", "tangential_force",
+                                               "status"), self._samples)):
+            if not pending:
+                continue
+            columns = list(zip(*pending))
+            pending.clear()
+            for index, name in enumerate(names):
+                dataset = self._get(f"{group}/{name}")
+                n = dataset.shape[0]
+                values = np.array(columns[index])
+                dataset.resize((n + len(values),) + dataset.shape[1:])
+                dataset[n:] = values
         self.file.flush()
 
     def write_contact_sample(self, sim: Simulation) -> None:
-        """Append (F_n, F_t, status) of the watched pairs (zeros and status 0 when not interacting)."""
-        fn, ft, status = watched_contacts(sim, self.watch)
-        _append(self._get("observables/contact_paths/normal_force"), fn)
-        _append(self._get("observables/contact_paths/tangential_force"), ft)
-        _append(self._get("observables/contact_paths/status"), status)
-        _append(self._get("observables/contact_paths/time"), sim.time)
-        self.file.flush()
+        """Record (F_n, F_t, status) of the watched pairs (zeros and status 0 when not interacting).
+        Samples wait in memory like cycle records."""
+        fn, elastic, ft, status = watched_contacts(sim, self.watch)
+        self._samples.append((sim.time, fn, elastic, ft, status))
+        if len(self._samples) >= 1000:
+            self._write_cycles()
 
     def write_checkpoint(self, sim: Simulation) -> None:
         """Write the full state into the older slot, then mark it valid; flush."""
@@ -297,20 +308,18 @@ class RunWriter:
 
 
 def watched_contacts(sim: Simulation, pairs: list[tuple[int, int]]):
-    """(F_n, F_t, status) of the rows of ``sim``'s contact table for ``pairs`` (zeros if absent)."""
-    table = sim.contacts
-    rows = table.count
-    lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(table.particle_i[:rows], table.particle_j[:rows]))}
-    fn = np.zeros(len(pairs))
-    ft = np.zeros(len(pairs))
+    """(F_n, N^e, F_t, status) of ``sim``'s contacts for ``pairs`` (zeros, status 0 when absent)."""
+    snapshot = sim.contact_snapshot()
+    lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(snapshot.i, snapshot.j))}
+    values = np.zeros((3, len(pairs)))
     status = np.zeros(len(pairs), dtype=np.int8)
     for index, (i, j) in enumerate(pairs):
         k = lookup.get((min(i, j), max(i, j)) if j < sim.particles.count else (i, j))
         if k is not None:
-            fn[index] = table.normal_force[k]
-            ft[index] = table.tangential_force[k]
-            status[index] = table.status[k]
-    return fn, ft, status
+            values[:, index] = (snapshot.normal_force[k], snapshot.elastic_normal_force[k],
+                                snapshot.tangential_force[k])
+            status[index] = snapshot.status[k]
+    return values[0], values[1], values[2], status
 
 
 # ---------------------------------------------------------------------------------------------- reading

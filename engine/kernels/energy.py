@@ -6,7 +6,7 @@ from numba import njit
 
 from ..state import STATUS_NONE, WALL_FORCE
 from .jit import JIT
-from .laws import D0, F0, KN, KR, KT, cohesion_potential, normal_potential, wrap_angle
+from .laws import D0, F0, KN, KR, KT, cohesion_potential, normal_elastic, normal_potential, wrap_angle
 
 (KINETIC_TRANSLATION, KINETIC_ROTATION, NORMAL_ELASTIC, COHESION, TANGENTIAL_ELASTIC, ROLLING_ELASTIC,
  GRAVITY, WALL_KINETIC) = range(8)
@@ -79,3 +79,15 @@ def rolling_distance(p, w, cell, ct, out):
             s_j = -ny * p.position[i, 0] + nx * p.position[i, 1] - w.tangential_position[wall] - ct.anchor_angle_j[k]
         s_i = ri * wrap_angle(phi + math.pi - p.angle[i] - ct.anchor_angle_i[k])
         out[k] = 0.5 * (s_i - s_j)
+
+
+@njit(**JIT)
+def elastic_normal_forces(p, ct, law, normal_model, out):
+    """``N^e`` of each row from its gap: the part of F_n that bounds F_t and the rolling moment."""
+    n = p.position.shape[0]
+    for k in range(ct.count[0]):
+        i = ct.particle_i[k]
+        j = ct.particle_j[k]
+        is_wall = j >= n
+        rj = 0.0 if is_wall else p.radius[j]
+        out[k] = normal_elastic(normal_model, law[KN], -ct.surface_gap[k], p.radius[i], rj, is_wall)
