@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -26,12 +26,15 @@ from .equilibrium import EquilibriumReport, equilibrium, measured_pressure, rela
 
 @dataclass
 class Prepared:
+    """A prepared packing; ``stages`` maps each stage of method 2 to its (simulated, wall-clock) time."""
+
     sim: Simulation
     report: EquilibriumReport
     sim_time: float
     wall_time_s: float
     method: str
     pressure: float
+    stages: dict = field(default_factory=dict)
 
     @property
     def equilibrated(self) -> bool:
@@ -198,10 +201,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     relaxation = relax(sim, pressure, max_time)
     stages["compression"] = (relaxation.sim_time, relaxation.wall_time_s)
     sim_time += relaxation.sim_time
-    prepared = Prepared(sim, relaxation.report, sim_time, time.perf_counter() - start,
-                        "2B" if accelerated else "2", pressure)
-    prepared.stages = stages
-    return prepared
+    return Prepared(sim, relaxation.report, sim_time, time.perf_counter() - start, "2B" if accelerated else "2",
+                    pressure, stages)
 
 
 def _stiffen(sim: Simulation, target_kn: float, law: ContactLaw, steps: int = 20) -> None:
