@@ -22,9 +22,9 @@ import time
 from pathlib import Path
 
 import numba
-import numpy as np
 
 from .errors import GranLabError
+from .io.jsonsafe import jsonable
 
 
 def _float(text: str) -> float:
@@ -32,24 +32,6 @@ def _float(text: str) -> float:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number (inf is allowed)") from None
-
-
-def _clean(value):
-    """JSON-safe copy: arrays to lists, inf/NaN to strings."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
@@ -272,7 +254,7 @@ def _print_info(result: dict) -> None:
         e = result["energy_last"]
         print(f"  last energies: kinetic {e['kinetic']:.6g}, stored {e['stored']:.6g}, balance {e['balance']:.6g}")
     if result.get("protocol"):
-        print(f"  protocol: {json.dumps(_clean(result['protocol']))}")
+        print(f"  protocol: {json.dumps(jsonable(result['protocol']))}")
 
 
 def _positive_int(text: str) -> int:
@@ -372,14 +354,18 @@ def _prepare_with_defaults(args) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    return run_args(build_parser().parse_args(argv))
+
+
+def run_args(args) -> int:
+    """Run a parsed command: print its result (or one JSON object); errors exit with status 2."""
     try:
         result = args.handler(args)
     except GranLabError as error:
         print(f"granlab {args.command}: error: {error}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(_clean(result)))
+        print(json.dumps(jsonable(result)))
     else:
         args.printer(result)
     return 0

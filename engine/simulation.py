@@ -184,6 +184,7 @@ class Snapshot:
     box_lengths: np.ndarray
     periodic: tuple[bool, bool]
     virial: np.ndarray
+    stress: np.ndarray
     energy: EnergyBudget
     law: ContactLaw
     dt: float
@@ -589,7 +590,8 @@ class Simulation:
             wall_normals=self.walls.normal.copy(), wall_offsets=self.walls.offset.copy(),
             wall_forces=self.walls.particle_force.copy(), cell_lengths=self.cell.length.copy(),
             box_lengths=self.box_lengths(),
-            periodic=self.periodic, virial=self.cell.virial.copy(), energy=self.energy(), law=self.law,
+            periodic=self.periodic, virial=self.cell.virial.copy(), stress=self.stress(), energy=self.energy(),
+            law=self.law,
             dt=self.dt)
 
     def box_lengths(self) -> np.ndarray:

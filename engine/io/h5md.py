@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from pathlib import Path
 
 import h5py
@@ -212,17 +211,16 @@ class RunWriter:
         _append(self._get(f"{path}/time"), time)
         _append(self._get(f"{path}/step"), step)
 
-    def write_frame(self, sim: Simulation) -> None:
-        """Append the current state as a frame (positions, contacts, observables) and the
-        cycle records waiting in memory; flush."""
+    def write_frame(self, state) -> None:
+        """Append a frame (positions, contacts, observables) from a :class:`Simulation` or a
+        :class:`Snapshot` taken earlier, and the cycle records waiting in memory; flush."""
         self._write_cycles()
-        step, time = sim.step, sim.time
-        snap = sim.snapshot()
-        self._element("particles/all/box/edges", step, time, sim.box_lengths())
+        snap = state.snapshot() if isinstance(state, Simulation) else state
+        step, time = snap.step, snap.time
+        self._element("particles/all/box/edges", step, time, snap.box_lengths)
         for name, value in (("position", snap.positions), ("velocity", snap.velocities), ("angle", snap.angles),
                             ("omega", snap.omegas), ("radius", snap.radii), ("mass", snap.masses)):
             self._element(f"particles/all/{name}", step, time, value)
-        contacts = self._get("contacts")
         c = snap.contacts
         values = {"pair": np.column_stack([c.i, c.j]), "image": c.image, "status": c.status,
                   "normal_force": c.normal_force, "elastic_normal_force": c.elastic_normal_force,
@@ -240,9 +238,9 @@ class RunWriter:
         _append(offset, start + c.count)
         budget = snap.energy.as_dict()
         self._element("observables/energy", step, time, [budget[k] for k in ENERGY_FIELDS])
-        self._element("observables/walls/position", step, time, sim.walls.offset)
-        self._element("observables/walls/force", step, time, sim.walls.particle_force)
-        self._element("observables/stress", step, time, sim.stress())
+        self._element("observables/walls/position", step, time, snap.wall_offsets)
+        self._element("observables/walls/force", step, time, snap.wall_forces)
+        self._element("observables/stress", step, time, snap.stress)
         self.file.flush()
 
     def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:

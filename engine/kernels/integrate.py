@@ -19,7 +19,6 @@ of a step (``FLAG_PHASE`` = drifted) and the next call, with a larger table, res
 
 import math
 
-import numpy as np
 from numba import njit, prange, uint64
 
 from ..state import CELL_NONE, CELL_STRAIN_RATE, CELL_STRESS, WALL_FIXED, WALL_FORCE
