@@ -45,7 +45,7 @@ class Prepared:
 def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness: float = 100.0,
                 box: float = 1.0, density: float = 1.0, damping_ratio: float = 0.3, normal_model: str = "linear",
                 tangential_model: str = "cundall-strack", wall_mass: float | None = None, dt: float | None = None,
-                dt_safety: float = 0.2) -> Simulation:
+                dt_safety: float = 0.2, wall_mass_fraction: float = 1.0) -> Simulation:
     """The initial biaxial box of ratcheting Sec. IV B 1, before compression.
 
     Units: box length L, pressure p (a 2D pressure, force per length) and density rho, so the
@@ -53,7 +53,8 @@ def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness
     ``r_max = L / (2 s)``, the disks on the sites of an ``s × s`` square lattice (the first
     ``count`` sites, ``s = ceil(sqrt(count))``); ``K_n = K_t = stiffness × p``; the left and
     bottom walls are fixed, the right and top ones pushed with ``pressure`` per unit length
-    (mass ``wall_mass``, default the total mass of the disks). Frictionless (mu = 0).
+    (mass ``wall_mass``, default ``wall_mass_fraction`` times the total mass of the disks).
+    Frictionless (mu = 0).
     """
     if not isinstance(count, (int, np.integer)) or count < 1:
         raise ParameterError("particles", count, "a whole number >= 1")
@@ -65,7 +66,7 @@ def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness
     particles = ParticleState(positions, r, density=density)
     law = ContactLaw(normal_stiffness=stiffness * pressure, tangential_stiffness=stiffness * pressure, friction=0.0,
                      damping_ratio=damping_ratio, normal_model=normal_model, tangential_model=tangential_model)
-    mass = float(particles.mass.sum()) if wall_mass is None else wall_mass
+    mass = wall_mass_fraction * float(particles.mass.sum()) if wall_mass is None else wall_mass
     walls = box_walls(0.0, box, 0.0, box, loads={"right": Load(base=pressure), "top": Load(base=pressure)},
                       wall_mass=mass)
     return Simulation(particles, law, Integration(dt=dt, dt_safety=dt_safety), walls=walls)
