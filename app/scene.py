@@ -1,0 +1,551 @@
+"""The lab's 3D scene: one viser server per process drawing `SceneFrame`s.
+
+The simulation is 2D: disks lie in the plane z = 0 of viser's world (z up) and
+the camera looks down the -z axis with +y up on the screen. Lengths are in the
+simulation's units; forces and pressures only set widths and colours, so their
+units do not matter.
+
+What is drawn (all handles live under ``/granlab``):
+
+- disks: one batched mesh of a unit cylinder (axis z, radius 1, height 1,
+  centred on z = 0), instance k scaled by (r_k, r_k, h) with h = 0.2 mean
+  radius and coloured by `SceneView.color_field`;
+- spokes: one segment per disk from its centre to its rim at angle theta;
+- force network: contact segments binned by |F| / max|F| into
+  `FORCE_CLASSES` width classes (viser's line width is per handle), coloured
+  by kind (compressive, tensile, sliding);
+- watched contacts, walls and the periodic cell outline: one handle each.
+
+Picking: viser 1.1.1 does report the clicked instance of a batched mesh that
+has a node on_click callback (the event's instance_index; its docstring still
+says None for all but batched axes), but such a clickable mesh makes the client
+build and refit a BVH over all instances at every update. The view listens to
+scene-wide clicks instead, which carry the click's ray in world coordinates
+without making anything clickable, and `pick_disk` intersects that ray with
+the plane of the disks' top faces.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass
+from time import monotonic
+from typing import Callable
+
+import numpy as np
+import viser
+
+COLOR_FIELDS = ("rotation", "coordination", "pressure", "sliding")
+
+DISK_SEGMENTS = 16
+"""Sides of the polygon standing for a disk: 60 triangles a disk (caps and
+side), 336 000 for 5600 disks, kept low for software-rendered WebGL."""
+
+DISK_HEIGHT = 0.2
+"""Cylinder height as a fraction of the frame's mean radius."""
+
+FORCE_CLASSES = 5
+"""Width classes of the force network: class k holds k/K <= |F|/max|F| < (k+1)/K
+(and the largest force, in class K - 1)."""
+
+MAX_FORCE_THICKNESS = 0.7
+"""Thickness of the strongest class, as a fraction of the mean radius; class k
+is (k + 1)/K of it."""
+
+SPOKE_THICKNESS = 0.08
+WATCHED_THICKNESS = 0.85
+WALL_THICKNESS = 0.2
+CELL_THICKNESS = 0.1
+"""Line thicknesses as fractions of the mean radius (world units)."""
+
+# Colours are sRGB as they should appear on screen; see srgb_to_linear for what
+# is sent where viser takes colour arrays.
+COMPRESSIVE_COLOR = (175, 25, 25)
+TENSILE_COLOR = (30, 90, 220)
+SLIDING_CONTACT_COLOR = (245, 160, 0)
+WATCHED_COLOR = (230, 0, 230)
+SPOKE_COLOR = (25, 25, 25)
+WALL_COLOR = (60, 60, 60)
+CELL_COLOR = (110, 110, 170)
+
+COORDINATION_COLORS = np.array(
+    [
+        (200, 200, 200),  # 0 contacts: rattler
+        (250, 225, 120),  # 1
+        (250, 170, 80),  # 2
+        (225, 85, 60),  # 3
+        (160, 70, 160),  # 4
+        (70, 120, 200),  # 5
+        (60, 160, 90),  # 6 or more
+    ],
+    dtype=np.uint8,
+)
+"""Colour of a disk with z contacts, z = 0..6 (6 stands for 6 or more)."""
+
+SLIDING_DISK_COLORS = np.array([(170, 190, 215), (245, 140, 0)], dtype=np.uint8)
+"""Colour of a disk without (row 0) and with (row 1) a sliding contact."""
+
+ENVIRONMENT_INTENSITY = 0.3
+"""Intensity of viser's environment map: at 1 (viser's default) the lit top
+faces show about a third brighter than their palette colours."""
+
+CAMERA_FOV = np.radians(30.0)
+"""Vertical field of view of the initial camera (radians): narrow, so the
+perspective hardly distorts the 2D picture."""
+
+_LUT_SIZE = 256
+_ROOT = "/granlab"
+
+
+def srgb_to_linear(colors: np.ndarray) -> np.ndarray:
+    """uint8 sRGB colours (any shape) -> uint8 linear-light values, rounded.
+
+    viser 1.1.1's client reads per-instance mesh colours and per-vertex line
+    colours as linear values (three.js Color.setRGB(c / 255)) and encodes them
+    to sRGB on output, so an sRGB colour sent as is shows up paler; a single
+    (3,) colour of a handle goes through Color(hex) and is taken as sRGB.
+    """
+    c = np.asarray(colors, dtype=np.float64) / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.round(255.0 * linear).astype(np.uint8)
+
+
+def _lookup_table(anchors: list[tuple[int, int, int]], cyclic: bool) -> np.ndarray:
+    """(256, 3) uint8 table interpolating the RGB anchors linearly (and back to
+    the first anchor if cyclic)."""
+    colors = np.asarray(anchors + anchors[:1] if cyclic else anchors, dtype=np.float64)
+    stops = np.linspace(0.0, 1.0, len(colors))
+    samples = np.arange(_LUT_SIZE) / (_LUT_SIZE if cyclic else _LUT_SIZE - 1)
+    table = np.stack([np.interp(samples, stops, colors[:, c]) for c in range(3)], axis=1)
+    return np.round(table).astype(np.uint8)
+
+
+ROTATION_LUT = _lookup_table(
+    [(225, 95, 95), (220, 190, 70), (95, 190, 105), (70, 180, 210), (105, 110, 220), (205, 95, 195)],
+    cyclic=True,
+)
+"""Cyclic map of theta: entry floor(256 theta / 2 pi) mod 256."""
+
+PRESSURE_LUT = _lookup_table(
+    [(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
+     (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37)],
+    cyclic=False,
+)
+"""Sequential map (viridis anchors) of p / max p: entry round(255 p / max p)."""
+
+_WIRE_TABLES = {
+    "rotation": srgb_to_linear(ROTATION_LUT),
+    "coordination": srgb_to_linear(COORDINATION_COLORS),
+    "pressure": srgb_to_linear(PRESSURE_LUT),
+    "sliding": srgb_to_linear(SLIDING_DISK_COLORS),
+    "contact kind": srgb_to_linear(np.array([COMPRESSIVE_COLOR, TENSILE_COLOR, SLIDING_CONTACT_COLOR])),
+}
+"""The palettes above as sent to viser (linear values)."""
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """One picture of the simulation for the 3D scene (2D disks in the x-y plane).
+
+    N disks, M contacts, W walls, K watched contacts; lengths in simulation units.
+    """
+
+    positions: np.ndarray      # (N, 2) float64 disk centres
+    radii: np.ndarray          # (N,) float64
+    angles: np.ndarray         # (N,) float64 rotation angle theta of each disk (radians)
+    coordination: np.ndarray   # (N,) int number of contacts of each disk
+    pressure: np.ndarray       # (N,) float64 a per-disk pressure value (>= 0)
+    sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
+    contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
+    contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
+    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
+    walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
+    cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
+    watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
+
+    def __post_init__(self) -> None:
+        sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
+                 "M": np.shape(self.contacts)[0] if np.ndim(self.contacts) else 0}
+        expected = {
+            "positions": ("N", 2), "radii": ("N",), "angles": ("N",), "coordination": ("N",),
+            "pressure": ("N",), "sliding": ("N",), "contacts": ("M", 2, 2), "contact_force": ("M",),
+            "contact_kind": ("M",), "walls": ("W", 2, 2), "watched": ("K", 2, 2),
+        }
+        for name, shape in expected.items():
+            actual = np.shape(getattr(self, name))
+            wanted = tuple(sizes.get(d, a) if isinstance(d, str) else d for d, a in zip(shape, actual))
+            if actual != wanted or len(actual) != len(shape):
+                allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
+                raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
+                                 f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
+        if self.cell is not None and (len(self.cell) != 2 or not all(np.isfinite(self.cell))
+                                      or min(self.cell) < 0.0):
+            raise ValueError(f"SceneFrame.cell = {self.cell!r}; allowed: None or two finite lengths >= 0")
+
+
+def unit_cylinder(segments: int = DISK_SEGMENTS) -> tuple[np.ndarray, np.ndarray]:
+    """Closed cylinder along z, z in [-1/2, 1/2], as (vertices (4s, 3) float32,
+    faces (4s - 4, 3) uint32), outward counter-clockwise winding.
+
+    The s-gon's circumradius is chosen so that its area is pi (the unit disk's),
+    so drawn disks cover the plane as the physical ones do. Caps and side have
+    their own vertices so the client's vertex normals stay flat on the caps.
+    """
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    ring_radius = np.sqrt(2.0 * np.pi / (segments * np.sin(2.0 * np.pi / segments)))
+    ring = np.stack([ring_radius * np.cos(phi), ring_radius * np.sin(phi)], axis=1)
+    bottom = np.column_stack([ring, np.full(segments, -0.5)])
+    top = np.column_stack([ring, np.full(segments, 0.5)])
+    vertices = np.concatenate([bottom, top, bottom, top]).astype(np.float32)
+
+    k = np.arange(segments)
+    nxt = (k + 1) % segments
+    side_bottom, side_top = 2 * segments, 3 * segments
+    side = np.concatenate([
+        np.stack([side_bottom + k, side_bottom + nxt, side_top + nxt], axis=1),
+        np.stack([side_bottom + k, side_top + nxt, side_top + k], axis=1),
+    ])
+    fan = np.arange(1, segments - 1)
+    top_cap = np.stack([np.full_like(fan, segments), segments + fan, segments + fan + 1], axis=1)
+    bottom_cap = np.stack([np.zeros_like(fan), fan + 1, fan], axis=1)
+    faces = np.concatenate([side, top_cap, bottom_cap]).astype(np.uint32)
+    return vertices, faces
+
+
+def pick_disk(ray_origin, ray_direction, positions: np.ndarray, radii: np.ndarray,
+              plane_z: float = 0.0) -> int | None:
+    """Index of the disk under a click, or None.
+
+    ray_origin, ray_direction: (3,) world coordinates of the click's ray;
+    positions (N, 2), radii (N,); plane_z: height of the plane the disks are
+    cut at (their top faces). The ray meets the plane at p; the disk k with
+    |p - x_k| <= r_k is returned (of overlapping disks, the smallest
+    |p - x_k| / r_k). None if the ray misses the plane or every disk.
+    """
+    ox, oy, oz = (float(v) for v in ray_origin)
+    dx, dy, dz = (float(v) for v in ray_direction)
+    if dz == 0.0 or len(radii) == 0:
+        return None
+    t = (plane_z - oz) / dz
+    if t < 0.0:
+        return None
+    hit = np.array([ox + t * dx, oy + t * dy])
+    relative = np.hypot(positions[:, 0] - hit[0], positions[:, 1] - hit[1]) / radii
+    k = int(np.argmin(relative))
+    return k if relative[k] <= 1.0 else None
+
+
+def force_classes(contact_force: np.ndarray, classes: int = FORCE_CLASSES) -> np.ndarray:
+    """(M,) int class of each contact: min(K - 1, floor(K |F| / max|F|)), all 0
+    when every force is 0. Thickness grows with the class."""
+    top = float(contact_force.max()) if len(contact_force) else 0.0
+    if top <= 0.0:
+        return np.zeros(len(contact_force), dtype=np.intp)
+    return np.minimum((contact_force * (classes / top)).astype(np.intp), classes - 1)
+
+
+def force_class_thickness(klass: int, mean_radius: float) -> float:
+    """World thickness of force class k: (k + 1)/K x MAX_FORCE_THICKNESS x mean radius."""
+    return (klass + 1) / FORCE_CLASSES * MAX_FORCE_THICKNESS * mean_radius
+
+
+def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:
+    """(xmin, xmax, ymin, ymax) of the disks, walls and cell outline."""
+    xs = [frame.positions[:, 0] - frame.radii, frame.positions[:, 0] + frame.radii,
+          frame.walls[:, :, 0].ravel()]
+    ys = [frame.positions[:, 1] - frame.radii, frame.positions[:, 1] + frame.radii,
+          frame.walls[:, :, 1].ravel()]
+    if frame.cell is not None:
+        xs.append(np.array([0.0, frame.cell[0]]))
+        ys.append(np.array([0.0, frame.cell[1]]))
+    x = np.concatenate(xs)
+    y = np.concatenate(ys)
+    if len(x) == 0:
+        return (-1.0, 1.0, -1.0, 1.0)
+    return (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
+
+
+def _segments_3d(segments: np.ndarray, z: float) -> np.ndarray:
+    """(S, 2, 2) planar segments -> (S, 2, 3) float32 at height z."""
+    points = np.empty((len(segments), 2, 3), dtype=np.float32)
+    points[:, :, :2] = segments
+    points[:, :, 2] = z
+    return points
+
+
+def _cell_outline(cell: tuple[float, float]) -> np.ndarray:
+    """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
+    lx, ly = cell
+    corners = np.array([(0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)])
+    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+
+
+class SceneView:
+    """The lab's viser scene: one ViserServer per process, drawing SceneFrames.
+
+    `draw` may be called from one thread (the engine thread); `color_field`,
+    `on_pick`, `fps` and the properties from any thread.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0):
+        self._server = viser.ViserServer(host=host, port=port, verbose=False)
+        self._server.gui.configure_theme(show_logo=False, show_share_button=False)
+        self._server.gui.main_panel.minimize()
+        self._server.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        self._server.scene.configure_environment_map(environment_intensity=ENVIRONMENT_INTENSITY)
+        self._lock = threading.Lock()
+        self._color_field = "rotation"
+        self._pick_callbacks: list[Callable[[int], None]] = []
+        self._draw_times: deque[float] = deque()
+        self._created = monotonic()
+        self.frames_pushed = 0
+
+        self._frame: SceneFrame | None = None
+        self._disks: viser.BatchedMeshHandle | None = None
+        self._disk_top = 0.0
+        self._positions3 = np.zeros((0, 3), dtype=np.float32)
+        self._scales3 = np.zeros((0, 3), dtype=np.float32)
+        self._colors = np.zeros((0, 3), dtype=np.uint8)
+        self._lut_index = np.zeros(0, dtype=np.intp)
+        self._scratch = np.zeros(0, dtype=np.float64)
+        self._spoke_points = np.zeros((0, 2, 3), dtype=np.float32)
+        self._contact_points = np.zeros((0, 2, 3), dtype=np.float32)
+        self._contact_colors = np.zeros((0, 2, 3), dtype=np.uint8)
+
+        scene = self._server.scene
+        empty = np.zeros((1, 2, 3), dtype=np.float32)
+
+        def lines(name: str, color: tuple[int, int, int]) -> viser.LineSegmentsHandle:
+            return scene.add_line_segments(f"{_ROOT}/{name}", empty, color, visible=False)
+
+        self._spokes = lines("spokes", SPOKE_COLOR)
+        self._forces = [lines(f"forces/class{k}", COMPRESSIVE_COLOR) for k in range(FORCE_CLASSES)]
+        self._watched = lines("watched", WATCHED_COLOR)
+        self._walls = lines("walls", WALL_COLOR)
+        self._cell = lines("cell", CELL_COLOR)
+        scene.on_click()(self._on_scene_click)
+
+    @property
+    def port(self) -> int:
+        """TCP port of the viser server (the client is at http://host:port)."""
+        return self._server.get_port()
+
+    @property
+    def server(self) -> viser.ViserServer:
+        """The underlying viser server (for GUI elements or client queries)."""
+        return self._server
+
+    @property
+    def handles(self) -> dict:
+        """The viser handles, to read back what was sent: "disks" (batched mesh,
+        None before the first draw), "spokes", "forces" (list, class 0 first),
+        "watched", "walls", "cell" (line segments)."""
+        return {"disks": self._disks, "spokes": self._spokes, "forces": list(self._forces),
+                "watched": self._watched, "walls": self._walls, "cell": self._cell}
+
+    @property
+    def connected_clients(self) -> int:
+        """Number of browser clients connected to the viser server."""
+        return len(self._server.get_clients())
+
+    @property
+    def color_field(self) -> str:
+        """What colours the disks: one of COLOR_FIELDS."""
+        return self._color_field
+
+    @color_field.setter
+    def color_field(self, value: str) -> None:
+        if value not in COLOR_FIELDS:
+            raise ValueError(f"color_field {value!r} is not allowed: one of {', '.join(COLOR_FIELDS)}")
+        with self._lock:
+            self._color_field = value
+            if self._frame is not None and self._disks is not None:
+                self._fill_colors(self._frame)
+                with self._server.atomic():
+                    self._disks.batched_colors = self._colors
+
+    def on_pick(self, callback: Callable[[int], None]) -> None:
+        """Call callback(disk_index) when a browser click lands on a disk
+        (indices of the last drawn frame; runs on viser's thread pool)."""
+        self._pick_callbacks.append(callback)
+
+    def fps(self) -> float:
+        """Draws completed per second over the last 2 s (or since construction
+        if that is shorter)."""
+        now = monotonic()
+        with self._lock:
+            self._forget_draws_before(now - 2.0)
+            count = len(self._draw_times)
+        window = min(2.0, now - self._created)
+        return count / window if window > 0.0 else 0.0
+
+    def close(self) -> None:
+        """Stop the viser server."""
+        self._server.stop()
+
+    def draw(self, frame: SceneFrame) -> None:
+        """Show `frame`: the disk mesh is rebuilt when N changes (and the
+        camera framed on it), otherwise its arrays are updated in place."""
+        with self._lock:
+            n = len(frame.radii)
+            mean_radius = float(frame.radii.mean()) if n else 1.0
+            height = DISK_HEIGHT * mean_radius
+            self._frame = frame
+            self._disk_top = 0.5 * height
+            self._fill_disks(frame, height)
+            self._fill_colors(frame)
+            self._fill_spokes(frame, 0.7 * height)
+            with self._server.atomic():
+                if self._disks is None or len(self._disks.batched_positions) != n:
+                    self._rebuild_disks()
+                    self._frame_camera(frame)
+                else:
+                    self._disks.batched_positions = self._positions3
+                    self._disks.batched_scales = self._scales3
+                    self._disks.batched_colors = self._colors
+                self._show(self._spokes, self._spoke_points, SPOKE_THICKNESS * mean_radius)
+                self._draw_forces(frame, 0.6 * height, mean_radius)
+                self._show(self._watched, _segments_3d(frame.watched, 0.8 * height),
+                           WATCHED_THICKNESS * mean_radius)
+                self._show(self._walls, _segments_3d(frame.walls, 0.0), WALL_THICKNESS * mean_radius)
+                outline = _cell_outline(frame.cell) if frame.cell is not None else np.zeros((0, 2, 2))
+                self._show(self._cell, _segments_3d(outline, 0.0), CELL_THICKNESS * mean_radius)
+            self.frames_pushed += 1
+            now = monotonic()
+            self._draw_times.append(now)
+            self._forget_draws_before(now - 2.0)
+
+    def _forget_draws_before(self, oldest: float) -> None:
+        while self._draw_times and self._draw_times[0] < oldest:
+            self._draw_times.popleft()
+
+    def _fill_disks(self, frame: SceneFrame, height: float) -> None:
+        """Instance positions (N, 3) and per-axis scales (r, r, h) into the buffers."""
+        n = len(frame.radii)
+        if len(self._positions3) != n:
+            self._positions3 = np.zeros((n, 3), dtype=np.float32)
+            self._scales3 = np.zeros((n, 3), dtype=np.float32)
+            self._colors = np.zeros((n, 3), dtype=np.uint8)
+            self._lut_index = np.zeros(n, dtype=np.intp)
+            self._scratch = np.zeros(n, dtype=np.float64)
+            self._spoke_points = np.zeros((n, 2, 3), dtype=np.float32)
+        self._positions3[:, :2] = frame.positions
+        self._scales3[:, 0] = frame.radii
+        self._scales3[:, 1] = frame.radii
+        self._scales3[:, 2] = height
+
+    def _fill_colors(self, frame: SceneFrame) -> None:
+        """Disk colours (N, 3) uint8 of `color_field`, as sent (linear), into the colour buffer."""
+        index, scratch = self._lut_index, self._scratch
+        field = self._color_field
+        if field == "rotation":
+            np.multiply(frame.angles, _LUT_SIZE / (2.0 * np.pi), out=scratch)
+            np.floor(scratch, out=scratch)
+            np.mod(scratch, _LUT_SIZE, out=scratch)
+            index[:] = scratch
+        elif field == "coordination":
+            np.clip(frame.coordination, 0, len(COORDINATION_COLORS) - 1, out=index, casting="unsafe")
+        elif field == "pressure":
+            top = float(frame.pressure.max()) if len(frame.pressure) else 0.0
+            np.multiply(frame.pressure, (_LUT_SIZE - 1) / top if top > 0.0 else 0.0, out=scratch)
+            np.rint(scratch, out=scratch)
+            np.clip(scratch, 0, _LUT_SIZE - 1, out=scratch)
+            index[:] = scratch
+        else:
+            index[:] = frame.sliding
+        np.take(_WIRE_TABLES[field], index, axis=0, out=self._colors)
+
+    def _fill_spokes(self, frame: SceneFrame, z: float) -> None:
+        """Spokes (N, 2, 3): centre -> centre + r (cos theta, sin theta), at height z."""
+        spokes, scratch = self._spoke_points, self._scratch
+        spokes[:, 0, :2] = frame.positions
+        np.cos(frame.angles, out=scratch)
+        scratch *= frame.radii
+        scratch += frame.positions[:, 0]
+        spokes[:, 1, 0] = scratch
+        np.sin(frame.angles, out=scratch)
+        scratch *= frame.radii
+        scratch += frame.positions[:, 1]
+        spokes[:, 1, 1] = scratch
+        spokes[:, :, 2] = z
+
+    def _rebuild_disks(self) -> None:
+        if self._disks is not None:
+            self._disks.remove()
+        vertices, faces = unit_cylinder()
+        wxyzs = np.zeros((len(self._positions3), 4), dtype=np.float32)
+        wxyzs[:, 0] = 1.0
+        self._disks = self._server.scene.add_batched_meshes_simple(
+            f"{_ROOT}/disks", vertices, faces, wxyzs, self._positions3,
+            batched_scales=self._scales3, batched_colors=self._colors,
+            lod="off", cast_shadow=False, receive_shadow=False,
+        )
+
+    def _frame_camera(self, frame: SceneFrame) -> None:
+        """Point the initial camera (and every connected client's) down -z at
+        the frame, +y up, far enough that the frame fills a square view."""
+        xmin, xmax, ymin, ymax = frame_bounds(frame)
+        centre = np.array([0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0])
+        half = 0.55 * max(xmax - xmin, ymax - ymin, 1e-9)
+        distance = half / np.tan(0.5 * CAMERA_FOV)
+        position = centre + np.array([0.0, 0.0, distance])
+        far = float(max(1000.0, 20.0 * distance))
+        camera = self._server.initial_camera
+        camera.fov = float(CAMERA_FOV)
+        camera.far = far
+        camera.up = (0.0, 1.0, 0.0)
+        camera.position = position
+        camera.look_at = centre
+        for client in self._server.get_clients().values():
+            client.camera.up_direction = (0.0, 1.0, 0.0)
+            client.camera.fov = float(CAMERA_FOV)
+            client.camera.far = far
+            client.camera.position = position
+            client.camera.look_at = centre
+
+    def _draw_forces(self, frame: SceneFrame, z: float, mean_radius: float) -> None:
+        """Contact segments sorted into FORCE_CLASSES handles by |F|, coloured by
+        kind, through buffers that grow geometrically with M."""
+        m = len(frame.contact_force)
+        if len(self._contact_points) < m:
+            capacity = max(m, 2 * len(self._contact_points))
+            self._contact_points = np.zeros((capacity, 2, 3), dtype=np.float32)
+            self._contact_colors = np.zeros((capacity, 2, 3), dtype=np.uint8)
+        points, colors = self._contact_points[:m], self._contact_colors[:m]
+        klass = force_classes(frame.contact_force)
+        order = np.argsort(klass, kind="stable")
+        bounds = np.zeros(FORCE_CLASSES + 1, dtype=np.intp)
+        np.cumsum(np.bincount(klass, minlength=FORCE_CLASSES), out=bounds[1:])
+        points[:, :, :2] = frame.contacts[order]
+        points[:, :, 2] = z
+        kind_colors = _WIRE_TABLES["contact kind"]
+        kind = np.clip(frame.contact_kind[order], 0, len(kind_colors) - 1)
+        colors[:] = kind_colors[kind][:, None, :]
+        for k, handle in enumerate(self._forces):
+            self._show(handle, points[bounds[k]:bounds[k + 1]], force_class_thickness(k, mean_radius),
+                       colors[bounds[k]:bounds[k + 1]])
+
+    @staticmethod
+    def _show(handle: viser.LineSegmentsHandle, points: np.ndarray, thickness: float,
+              colors: np.ndarray | None = None) -> None:
+        """Give a line handle its segments (S, 2, 3); hide it when S = 0 (the
+        client is never sent empty line geometry)."""
+        if len(points) == 0:
+            handle.visible = False
+            return
+        handle.points = points
+        if colors is not None:
+            handle.colors = colors
+        handle.thickness = thickness
+        handle.visible = True
+
+    def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
+        frame = self._frame
+        if frame is None:
+            return
+        hit = pick_disk(event.ray_origin, event.ray_direction, frame.positions, frame.radii,
+                        plane_z=self._disk_top)
+        if hit is not None:
+            for callback in list(self._pick_callbacks):
+                callback(hit)
