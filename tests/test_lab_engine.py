@@ -1,0 +1,153 @@
+"""The lab's engine thread without a browser: commands, series for many readers, files, errors."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from app.buffers import Cursor, SeriesBuffer
+from app.engine_thread import LabEngine, safe_path
+from engine import ParameterError
+from engine.io import h5md
+
+
+def wait(predicate, timeout=60.0):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError("condition not met in time")
+
+
+def last_message(engine, cursor=Cursor()):
+    _, _, columns = engine.messages.since(cursor)
+    return list(zip(columns["level"], columns["text"]))
+
+
+@pytest.fixture
+def engine(tmp_path):
+    lab = LabEngine(tmp_path, preset="ratchet16")
+    lab.start()
+    wait(lambda: lab.status()["step"] > 0)
+    yield lab
+    lab.stop()
+    assert not lab.alive
+
+
+@pytest.mark.parametrize("name", ["../escape.h5", "/tmp/abs.h5", "sub/run.h5", "..", ".hidden", "a" * 101, "",
+                                  "bad name.h5"])
+def test_safe_path_refuses_anything_but_a_plain_name(tmp_path, name):
+    with pytest.raises(ParameterError, match="plain name"):
+        safe_path(tmp_path, name)
+
+
+def test_safe_path_adds_h5_inside_the_data_folder(tmp_path):
+    assert safe_path(tmp_path, "run1") == tmp_path / "run1.h5"
+    assert safe_path(tmp_path, "run-2.h5") == tmp_path / "run-2.h5"
+
+
+def test_series_buffer_serves_each_reader_what_it_has_not_seen():
+    buffer = SeriesBuffer(("t", "x"), capacity=5)
+    first, second = Cursor(), Cursor()
+    buffer.extend([(0.0, 1.0), (1.0, 2.0)])
+    first, reset, columns = buffer.since(first)
+    assert reset and columns == {"t": [0.0, 1.0], "x": [1.0, 2.0]}
+    buffer.extend([(2.0, 3.0)])
+    first, reset, columns = buffer.since(first)
+    assert not reset and columns["t"] == [2.0]
+    second, reset, columns = buffer.since(second)
+    assert reset and columns["t"] == [0.0, 1.0, 2.0]
+    buffer.extend([(float(k), 0.0) for k in range(3, 10)])  # beyond the capacity: the oldest go
+    first, reset, columns = buffer.since(first)
+    assert not reset and columns["t"] == [5.0, 6.0, 7.0, 8.0, 9.0]
+    buffer.reset(("t", "y"))
+    first, reset, columns = buffer.since(first)
+    assert reset and columns == {"t": [], "y": []}
+
+
+def test_a_control_reaches_the_engine_between_steps(engine):
+    engine.submit("apply", changes={"damping_ratio": 0.45})
+    wait(lambda: engine.status()["settings"]["damping_ratio"] == 0.45, timeout=5.0)
+    assert engine.source.sim.law.damping_ratio == 0.45
+    assert engine.status()["command_ms"] > 0.0  # how long the control waited in the queue
+    # friction waits for the end of the frictionless compression, the status shows it at once
+    engine.submit("apply", changes={"friction": 0.45})
+    wait(lambda: engine.status()["settings"]["friction"] == 0.45, timeout=5.0)
+    engine.submit("apply", changes={"friction": math.inf})
+    wait(lambda: engine.status()["settings"]["friction"] == "inf", timeout=5.0)
+
+
+def test_an_invalid_control_is_refused_and_the_run_goes_on(engine):
+    cursor, _, _ = engine.messages.since(Cursor())
+    engine.submit("apply", changes={"damping_ratio": 1.5})
+    wait(lambda: last_message(engine, cursor))
+    level, text = last_message(engine, cursor)[-1]
+    assert level == "error" and "damping_ratio = 1.5 is not allowed" in text
+    status = engine.status()
+    assert status["settings"]["damping_ratio"] == 0.3 and status["state"] == "running"
+    step = status["step"]
+    wait(lambda: engine.status()["step"] > step)
+
+
+def test_pause_step_and_play(engine):
+    engine.submit("pause")
+    wait(lambda: engine.status()["state"] == "paused")
+    step = engine.status()["step"]
+    time.sleep(0.3)
+    assert engine.status()["step"] == step
+    engine.submit("step")
+    wait(lambda: engine.status()["step"] == step + engine.source.settings.steps_per_frame)
+    engine.submit("play")
+    wait(lambda: engine.status()["step"] > step + engine.source.settings.steps_per_frame)
+
+
+def test_a_diverging_run_pauses_with_an_error_and_keeps_its_last_good_state(engine):
+    wait(lambda: engine.status().get("cycle", 0) >= 1)
+    # a pressure 10^5 times the stiffness scale crushes the disks into each other at the next cycle
+    engine.submit("apply", changes={"pressure": 1e5})
+    wait(lambda: engine.status()["state"] == "error")
+    status = engine.status()
+    assert "overlap" in status["error"] and "Paused" in status["error"] and not engine.running
+    sim = engine.source.sim
+    position, step = sim.particles.position.copy(), sim.step
+    assert np.all(np.isfinite(position))
+    overlap = sim.contact_snapshot().surface_gap
+    assert -overlap.min() < sim.integration.max_overlap * sim.particles.radius.min()
+    time.sleep(0.3)
+    assert sim.step == step and np.array_equal(sim.particles.position, position)
+
+
+def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
+    time.sleep(1.5)  # at least one frame in the history
+    engine.submit("save", name="lab-run")
+    wait(lambda: "lab-run.h5" in engine.saved_files())
+    with h5md.open_run(tmp_path / "lab-run.h5") as f:
+        frames = h5md.frame_count(f)
+        assert frames >= 2
+        assert h5md.read_frame(f, frames - 1)["position"].shape == (16, 2)
+    engine.submit("load", name="lab-run.h5")
+    wait(lambda: engine.status()["preset"] == "replay:lab-run.h5")
+    cursor, reset, columns = engine.series("replay", Cursor())
+    assert reset and len(columns["t"]) == frames
+    cursor, _, _ = engine.messages.since(Cursor())
+    engine.submit("save", name="again")
+    wait(lambda: last_message(engine, cursor))
+    assert "a running preset" in last_message(engine, cursor)[-1][1]
+    engine.submit("preset", name="block")
+    wait(lambda: engine.status()["preset"] == "block")
+
+
+def test_refused_file_names_leave_the_data_folder_untouched(engine, tmp_path):
+    cursor, _, _ = engine.messages.since(Cursor())
+    engine.submit("save", name="../outside")
+    wait(lambda: last_message(engine, cursor))
+    assert "plain name" in last_message(engine, cursor)[-1][1]
+    assert not (tmp_path.parent / "outside.h5").exists() and list(tmp_path.iterdir()) == []
+    engine.submit("load", name="missing.h5")
+    wait(lambda: len(last_message(engine, cursor)) == 2)
+    level, text = last_message(engine, cursor)[-1]
+    assert level == "error" and "missing.h5" in text
+    assert engine.status()["preset"] == "ratchet16" and engine.status()["state"] == "running"
