@@ -166,7 +166,7 @@ def test_compression_preset_reaches_the_imposed_pressure():
 
 def test_watch_disk_toggles_its_contacts():
     preset = make_preset("ratchet16")
-    preset.advance(200)
+    run_until(preset, lambda p: mobilisation(p.sim), steps=200)
     contacts = mobilisation(preset.sim)
     disk = next(iter(contacts))[0]
     preset.watch_disk(disk)

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParameterError
-from ..params import TANGENTIAL_MODELS, ContactLaw, Integration, PeriodicCell, Wall, finite, nonnegative, positive
+from ..params import (TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, nonnegative,
+                      positive)
 from ..simulation import Simulation
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState
 from .cyclic import CyclicLoad, apply_load, steps_per_cycle
@@ -236,6 +237,7 @@ class RatchetPreset(Preset):
               "contacts": ("watch", "t", "normal", "tangential", "status")}
     elliptic = False
     compression_limit = 200.0
+    compression_ramp = 10.0
     watch_count = 4
 
     def _build(self) -> None:
@@ -245,7 +247,14 @@ class RatchetPreset(Preset):
         self._sim = biaxial_box(s.particles, seed=s.seed, pressure=s.pressure, damping_ratio=s.damping_ratio,
                                 tangential_model=s.tangential_model,
                                 wall_mass_fraction=1.0 / math.ceil(math.sqrt(s.particles)))
+        # the pressure rises smoothly from 0 to P0 over the ramp, so that the loose lattice
+        # collapses slowly: at the full pressure at once, large samples meet at speeds that
+        # overlap disks by half a radius
+        ramp = Load(amplitude=s.pressure / 2.0, period=2.0 * self.compression_ramp)
+        for wall in ("right", "top"):
+            self._sim.set_wall_load(wall, ramp)
         self.stage = "compressing"
+        self._ramping = True
         self._cycle = 0
         self._next_check = 1.0
         self._pending_load = None
@@ -273,7 +282,11 @@ class RatchetPreset(Preset):
         sim = self._sim
         if self.stage == "compressing":
             sim.run(steps)
-            if sim.time >= self._next_check:
+            if self._ramping and sim.time >= self.compression_ramp:
+                self._ramping = False
+                for wall in ("right", "top"):
+                    sim.set_wall_load(wall, Load(base=self.settings.pressure))
+            if not self._ramping and sim.time >= self._next_check:
                 self._next_check = sim.time + 1.0
                 if equilibrium(sim, self.settings.pressure).equilibrated or sim.time > self.compression_limit:
                     self._start_cycling()
