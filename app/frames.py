@@ -85,6 +85,16 @@ def _wall_segments(data: FrameData) -> np.ndarray:
     return np.array(segments, dtype=float).reshape(-1, 2, 2)
 
 
+def _rows_of(pair: np.ndarray, wanted) -> np.ndarray:
+    """Rows of the pair table ``pair`` that are among the pairs ``wanted``."""
+    if not len(wanted) or not len(pair):
+        return np.zeros(0, dtype=np.int64)
+    wanted = np.asarray(wanted, dtype=np.int64).reshape(-1, 2)
+    base = int(max(pair.max(), wanted.max())) + 1
+    codes = pair[:, 0].astype(np.int64) * base + pair[:, 1]
+    return np.flatnonzero(np.isin(codes, wanted[:, 0] * base + wanted[:, 1]))
+
+
 def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                 watched: list[list[tuple[int, int]]] | None = None) -> SceneFrame:
     """A scene frame of one or more states drawn side by side (each shifted by its offset).
@@ -121,9 +131,7 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
         arrays["force"].append(np.hypot(data.normal_force, data.tangential_force))
         arrays["kind"].append(kind.astype(np.int8))
         arrays["walls"].append(_wall_segments(data) + shift)
-        keys = {(int(a), int(b)) for a, b in pairs}
-        chosen = [k for k, (a, b) in enumerate(data.pair) if (int(a), int(b)) in keys]
-        arrays["watched"].append(segments[chosen].reshape(-1, 2, 2))
+        arrays["watched"].append(segments[_rows_of(data.pair, pairs)].reshape(-1, 2, 2))
         if data.cell.any() and len(parts) == 1:
             cell = (float(data.cell[0]), float(data.cell[1]))
     joined = {key: np.concatenate(value) for key, value in arrays.items()}
