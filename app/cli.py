@@ -1,0 +1,51 @@
+"""The ``granlab`` command: the engine's commands (:mod:`engine.cli`), ``serve`` (the lab) and
+``bench --lab`` (the lab's benchmark)."""
+
+from __future__ import annotations
+
+import sys
+
+from engine import cli as engine_cli
+from engine.errors import GranLabError
+
+
+def build_parser():
+    parser = engine_cli.build_parser()
+    commands = next(action for action in parser._actions if action.dest == "command")
+    serve = commands.add_parser("serve", help="start the browser lab (engine thread, 3D scene, dashboard)")
+    serve.add_argument("--port", type=int, default=5006, help="dashboard port (default 5006; 0: any free port)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    serve.add_argument("--data-dir", default="granlab-data", help="folder for saved runs (default ./granlab-data)")
+    serve.add_argument("--preset", default="ratchet", help="preset shown first (default ratchet)")
+    serve.add_argument("--particles", type=int, help="number of disks of the first preset (default: the preset's)")
+    serve.add_argument("--seed", type=int, help="seed of the first preset (default 0)")
+    bench = commands.choices["bench"]
+    bench.add_argument("--lab", action="store_true",
+                       help="benchmark the lab instead: a served preset streaming to a headless Chromium tab")
+    bench.add_argument("--particles", type=int, default=5600, help="disks in the lab benchmark (default 5600)")
+    bench.add_argument("--seconds", type=float, default=20.0, help="length of each lab measurement (default 20 s)")
+    bench.add_argument("--tabs", type=int, default=100, help="tabs opened and closed by the lab benchmark (default 100)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "serve":
+            from .server import serve
+
+            changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
+            serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, **changes)
+            return 0
+        if args.command == "bench" and args.lab:
+            from . import bench
+
+            args.handler, args.printer = bench.handler, bench.print_result
+    except GranLabError as error:
+        print(f"granlab {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    return engine_cli.run_args(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""``granlab serve``: the engine thread, the viser scene and the panel server, together.
+
+Binds 127.0.0.1 unless told otherwise (the lab has no authentication). Routes: ``/`` the
+dashboard (one per tab), ``/status`` JSON for tests and monitoring. The viser client is served
+by viser on its own port and embedded in the dashboard.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import panel as pn
+import tornado.web
+
+from engine.errors import GranLabError
+from engine.io.jsonsafe import jsonable
+
+from .dashboard import Dashboard
+from .engine_thread import LabEngine
+from .scene import SceneView
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+class StatusHandler(tornado.web.RequestHandler):
+    """``GET /status``: the engine's status as JSON."""
+
+    def initialize(self, lab):
+        self.lab = lab
+
+    def get(self):
+        self.set_header("Content-Type", "application/json")
+        self.set_header("Cache-Control", "no-store")
+        self.write(json.dumps(jsonable(self.lab.status())))
+
+
+class Lab:
+    """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
+                 preset: str = "ratchet", scene_rate: float = 30.0, **changes):
+        self.host = host
+        self.engine = LabEngine(data_dir, preset, **changes)
+        self.scene = SceneView(host=host, port=0)
+        self.scene.on_pick(lambda index: self.engine.submit("watch_disk", index=index))
+        self.engine.scene_fps = self.scene.fps
+        self.scene_interval = 1.0 / scene_rate
+        self._stop = threading.Event()
+        self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
+        self.port = port or _free_port(host)
+        origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
+        self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
+                               show=False, start=False, title="GranLab", threaded=False,
+                               extra_patterns=[(r"/status", StatusHandler, {"lab": self})],
+                               check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000)
+
+    def status(self) -> dict:
+        status = self.engine.status()
+        status["threads"] = threading.active_count()
+        status["scene_frames"] = self.scene.frames_pushed
+        return status
+
+    def _session(self):
+        self.engine.tabs += 1
+        pn.state.on_session_destroyed(self._closed)
+        host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
+        return Dashboard(self.engine, self.scene, f"http://{host}:{self.scene.port}/").view()
+
+    def _closed(self, session_context) -> None:
+        self.engine.tabs = max(0, self.engine.tabs - 1)
+
+    def _push_scene(self) -> None:
+        last = -1
+        while not self._stop.is_set():
+            start = time.perf_counter()
+            seq, frame = self.engine.frame()
+            if seq != last and frame is not None:
+                last = seq
+                self.scene.draw(frame)
+            self._stop.wait(max(0.0, self.scene_interval - (time.perf_counter() - start)))
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}/"
+
+    def start(self) -> None:
+        self.engine.start()
+        self._scene_thread.start()
+        self.server.start()
+
+    def run_forever(self) -> None:
+        self.start()
+        try:
+            self.server.io_loop.start()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.engine.stop()
+        self.scene.close()
+        self.server.stop()
+
+
+def _free_port(host: str) -> int:
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.bind((host, 0))
+        return sock.getsockname()[1]
+
+
+def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
+          **changes) -> None:
+    """Start the lab and serve until interrupted (prints the URL). ``changes``: settings of the
+    first preset (e.g. ``particles=5600``)."""
+    if host not in LOCAL_HOSTS:
+        print(f"warning: serving on {host}: the lab has no authentication; anyone who can reach this address "
+              "can control the simulation and write files in its data folder", file=sys.stderr)
+    print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
+    lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, **changes)
+    print(f"GranLab lab at {lab.url} (3D scene on port {lab.scene.port}; status at {lab.url}status)", flush=True)
+    lab.run_forever()
+
+
+def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
+    """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
+    benchmarks and tests); returns the process and the URL it prints once serving."""
+    process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", "0", "--data-dir", str(data_dir),
+                                *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        found = re.search(r"GranLab lab at (http://\S+/)", line)
+        if found:
+            return process, found.group(1)
+    process.kill()
+    raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
