@@ -21,8 +21,6 @@ import shutil
 import statistics
 import tempfile
 import time
-import urllib.request
-import json
 from pathlib import Path
 
 import numba
@@ -31,6 +29,7 @@ from engine import bench as engine_bench
 from engine.errors import GranLabError
 from engine.protocols.presets import make_preset, preset_settings
 
+from .server import read_status as _status
 from .server import spawn
 
 TARGETS = {"engine_fraction": 0.5, "scene_fps": 20.0, "latency_ms": 200.0}
@@ -57,11 +56,6 @@ def headless_rate(particles: int, seconds: float) -> float:
         return (preset.sim.step - step0) * particles / (time.perf_counter() - start)
     finally:
         numba.set_num_threads(previous)
-
-
-def _status(url: str) -> dict:
-    with urllib.request.urlopen(url + "status", timeout=10) as response:
-        return json.loads(response.read())
 
 
 def _memory(pid: int) -> float:

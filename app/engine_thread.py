@@ -169,7 +169,6 @@ class LabEngine:
         last_frame = last_sample = last_history = time.perf_counter()
         while not self._stop.is_set():
             self._drain(block=not self.running)
-            now = time.perf_counter()
             if self.running:
                 self._step_once()
             now = time.perf_counter()

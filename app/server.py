@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.request
 from pathlib import Path
 
 import panel as pn
@@ -145,3 +146,9 @@ def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
             return process, found.group(1)
     process.kill()
     raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
+
+
+def read_status(url: str) -> dict:
+    """``GET /status`` of the lab at ``url``."""
+    with urllib.request.urlopen(url + "status", timeout=10) as response:
+        return json.loads(response.read())
