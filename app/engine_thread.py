@@ -32,9 +32,11 @@ from engine.protocols.presets import PRESETS, RESET_CONTROLS, LabSettings, Prese
 
 from .buffers import Cursor, SeriesBuffer
 from .frames import FrameData, build_frame
+from .scene import SceneFrame
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_BYTES = 64 * 2 ** 20
+CHUNK_SECONDS = 0.02
 
 
 def safe_path(data_dir: Path, name: str) -> Path:
@@ -111,6 +113,8 @@ class LabEngine:
         self._lock = threading.Lock()
         self._frame = None
         self._frame_seq = 0
+        self._frame_taken = True
+        self._frame_ready = threading.Event()
         self._status: dict = {}
         self.running = True
         self.error = ""
@@ -123,7 +127,7 @@ class LabEngine:
         self._thread = threading.Thread(target=self._loop, name="granlab-engine", daemon=True)
         self.source: Preset | Replay = make_preset(preset, preset_settings(preset, **changes))
         self._reset_buffers()
-        self._publish(force=True)
+        self._publish()
 
     # ------------------------------------------------------------------ for the UI threads
     def start(self) -> None:
@@ -143,9 +147,19 @@ class LabEngine:
         ``watch_disk``, ``save``, ``load``); it never blocks. Its outcome arrives in :attr:`messages`."""
         self.commands.put((command, payload, time.perf_counter()))
 
-    def frame(self) -> tuple[int, object]:
+    def frame(self, seen: int = -1, timeout: float = 0.0) -> tuple[int, SceneFrame | None]:
+        """The latest scene frame if its sequence number is not ``seen`` (else None), waiting up
+        to ``timeout`` seconds for one. The engine thread publishes the arrays; the frame is
+        built here, on the caller's thread, and the engine copies the next arrays only once
+        these were taken (a slow scene costs the engine nothing)."""
+        self._frame_ready.wait(timeout)
         with self._lock:
-            return self._frame_seq, self._frame
+            seq, parts = self._frame_seq, self._frame
+            if seq == seen or parts is None:
+                return seq, None
+            self._frame_taken = True
+            self._frame_ready.clear()
+        return seq, build_frame(*parts)
 
     def status(self) -> dict:
         with self._lock:
@@ -170,14 +184,14 @@ class LabEngine:
         while not self._stop.is_set():
             self._drain(block=not self.running)
             if self.running:
-                self._step_once()
+                self._step_once(chunked=True)
             now = time.perf_counter()
             if now - last_sample >= self.sample_interval:
                 last_sample = now
                 self._sample()
             if now - last_frame >= self.frame_interval:
                 last_frame = now
-                self._publish()
+                self._publish(frame=self._frame_taken)
             if now - last_history >= 1.0 and isinstance(self.source, Preset) and self.running:
                 last_history = now
                 self._remember()
@@ -224,7 +238,7 @@ class LabEngine:
             elif command == "load":
                 self._load(payload["name"])
             self.command_ms = 1000.0 * (time.perf_counter() - submitted)
-            self._publish(force=True)
+            self._publish()
         except (GranLabError, ValueError, OSError) as error:
             self.messages.extend([("error", str(error))])
 
@@ -264,13 +278,19 @@ class LabEngine:
         if isinstance(self.source, Replay):
             self.buffers["replay"].extend(self.source.rows_ready)
 
-    def _step_once(self) -> None:
+    def _step_once(self, chunked: bool = False) -> None:
+        """Advance ``steps_per_frame`` steps; while running (``chunked``) at most what takes
+        ``CHUNK_SECONDS`` at the measured rate, so that controls wait little and frames come
+        often however large the system."""
         source = self.source
         if isinstance(source, Replay):
             source.advance()
             time.sleep(0.1)
             return
         steps = source.settings.steps_per_frame
+        seconds = sum(r[3] for r in self._rate)
+        if chunked and seconds > 0.0:
+            steps = max(1, min(steps, int(CHUNK_SECONDS * sum(r[2] for r in self._rate) / seconds)))
         start = time.perf_counter()
         try:
             source.advance(steps)
@@ -289,15 +309,18 @@ class LabEngine:
             for name, rows in self.source.rows().items():
                 self.buffers[name].extend(rows)
 
-    def _publish(self, force: bool = False) -> None:
+    def _publish(self, frame: bool = True) -> None:
+        """Publish the status and, if ``frame``, a copy of what the scene draws (the arrays of
+        :class:`FrameData`; the scene's thread builds the frame from them)."""
         source = self.source
         if isinstance(source, Replay):
-            frame = build_frame([(source.data(), (0.0, 0.0))])
+            parts = ([(source.data(), (0.0, 0.0))], None)
             status = source.status()
         else:
             views = source.views()
-            frame = build_frame([(FrameData.from_snapshot(v.sim.snapshot()), v.offset) for v in views],
-                                [source.watched()] + [[] for _ in views[1:]])
+            if frame:
+                parts = ([(FrameData.from_simulation(v.sim), v.offset) for v in views],
+                         [source.watched()] + [[] for _ in views[1:]])
             sim = views[0].sim
             status = source.status()
             status.update(time=sim.time, step=sim.step, particles=sum(v.sim.particles.count for v in views),
@@ -307,10 +330,14 @@ class LabEngine:
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
                       presets=list(PRESETS), command_ms=self.command_ms)
+        status = jsonable(status)
         with self._lock:
-            self._frame = frame
-            self._frame_seq += 1
-            self._status = jsonable(status)
+            self._status = status
+            if frame:
+                self._frame = parts
+                self._frame_seq += 1
+                self._frame_taken = False
+                self._frame_ready.set()
 
     def _remember(self) -> None:
         snap = self.source.views()[0].sim.snapshot()

@@ -1,16 +1,20 @@
 """Scene frames: what the 3D view draws, computed from a simulation state (or a run-file frame).
 
-Everything here is numpy over arrays the engine thread copied: building a frame never touches
-the live simulation, so the scene thread can draw it while the engine runs on.
+The engine thread only copies the arrays a frame needs (:meth:`FrameData.from_simulation`, the
+contact rows in use); the scene thread builds the frame from that copy, so building never
+touches the live simulation and costs the engine thread nothing but the copy.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from engine.state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from engine.kernels.jit import KERNEL
+from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 from .scene import SceneFrame
 
@@ -38,29 +42,16 @@ class FrameData:
     cell: np.ndarray
 
     @classmethod
-    def from_snapshot(cls, snap) -> "FrameData":
-        c = snap.contacts
-        return cls(snap.positions, snap.radii, snap.angles, np.column_stack([c.i, c.j]), c.image, c.status,
-                   c.normal_force, c.tangential_force, c.surface_gap, snap.wall_normals, snap.wall_offsets,
-                   np.where(np.array(snap.periodic), snap.cell_lengths, 0.0))
-
-
-def _contact_geometry(data: FrameData):
-    """Segments from each disk's centre to its partner (the periodic image next to it) or to the wall."""
-    n = data.positions.shape[0]
-    i, j = data.pair[:, 0], data.pair[:, 1]
-    start = data.positions[i]
-    end = np.empty_like(start)
-    pair = j < n
-    jj = j[pair]
-    end[pair] = data.positions[jj] + data.image[pair] * data.cell
-    wall = ~pair
-    if wall.any():
-        w = j[wall] - n
-        normal = data.wall_normal[w]
-        distance = data.radii[i[wall]] + data.surface_gap[wall]
-        end[wall] = start[wall] - distance[:, None] * normal
-    return np.stack([start, end], axis=1)
+    def from_simulation(cls, sim) -> "FrameData":
+        """A copy of what a frame needs from a live :class:`engine.simulation.Simulation`: the
+        disks and the contact rows in use (a fraction of a full snapshot's cost)."""
+        p, table = sim.particles, sim.contacts
+        rows = np.flatnonzero(table.status[:table.count] != STATUS_NONE)
+        return cls(p.position.copy(), p.radius.copy(), p.angle.copy(),
+                   np.column_stack([table.particle_i[rows], table.particle_j[rows]]), table.image[rows],
+                   table.status[rows], table.normal_force[rows], table.tangential_force[rows],
+                   table.surface_gap[rows], sim.walls.normal.copy(), sim.walls.offset.copy(),
+                   np.where(np.array(sim.periodic), sim.cell.length, 0.0))
 
 
 def _wall_segments(data: FrameData) -> np.ndarray:
@@ -99,44 +90,81 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                 watched: list[list[tuple[int, int]]] | None = None) -> SceneFrame:
     """A scene frame of one or more states drawn side by side (each shifted by its offset).
 
-    ``watched[k]`` lists the pairs (i, j) of part k to highlight.
+    ``watched[k]`` lists the pairs (i, j) of part k to highlight. The per-disk and per-contact
+    fields are filled by one compiled pass over each part's contact table (the GIL released).
     """
     watched = watched or [[] for _ in parts]
-    arrays = {key: [] for key in ("positions", "radii", "angles", "coordination", "pressure", "sliding", "contacts",
-                                  "force", "kind", "walls", "watched")}
+    n_total = sum(data.positions.shape[0] for data, _ in parts)
+    m_total = sum(data.pair.shape[0] for data, _ in parts)
+    coordination = np.zeros(n_total, dtype=np.int64)
+    pressure = np.zeros(n_total)
+    sliding = np.zeros(n_total, dtype=np.bool_)
+    segments = np.empty((m_total, 2, 2))
+    force = np.empty(m_total)
+    kind = np.empty(m_total, dtype=np.int8)
+    positions, walls, watched_segments = [], [], []
     cell = None
+    n0 = m0 = 0
     for (data, offset), pairs in zip(parts, watched):
         shift = np.asarray(offset, dtype=float)
-        n = data.positions.shape[0]
-        touching = np.isin(data.status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
-        sliding = np.isin(data.status, (STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
-        i, j = data.pair[:, 0], data.pair[:, 1]
-        disk_pair = j < n
-        coordination = np.bincount(i[touching], minlength=n) + np.bincount(j[touching & disk_pair], minlength=n)
-        load = np.abs(data.normal_force)
-        pressure = (np.bincount(i, weights=load, minlength=n)
-                    + np.bincount(j[disk_pair], weights=load[disk_pair], minlength=n)) / (2 * np.pi * data.radii)
-        slides = np.zeros(n, dtype=bool)
-        slides[i[sliding]] = True
-        slides[j[sliding & disk_pair]] = True
-        segments = _contact_geometry(data) + shift
-        kind = np.where(sliding, 2, np.where((data.normal_force < 0) | (data.status == STATUS_COHESIVE), 1, 0))
-        arrays["positions"].append(data.positions + shift)
-        arrays["radii"].append(data.radii)
-        arrays["angles"].append(data.angles)
-        arrays["coordination"].append(coordination)
-        arrays["pressure"].append(pressure)
-        arrays["sliding"].append(slides)
-        arrays["contacts"].append(segments)
-        arrays["force"].append(np.hypot(data.normal_force, data.tangential_force))
-        arrays["kind"].append(kind.astype(np.int8))
-        arrays["walls"].append(_wall_segments(data) + shift)
-        arrays["watched"].append(segments[_rows_of(data.pair, pairs)].reshape(-1, 2, 2))
+        n, m = data.positions.shape[0], data.pair.shape[0]
+        contact_fields(data.positions, data.radii, data.pair, data.image, data.status, data.normal_force,
+                       data.tangential_force, data.surface_gap, data.wall_normal,
+                       np.asarray(data.cell, dtype=float), shift, coordination[n0:n0 + n], pressure[n0:n0 + n],
+                       sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m], kind[m0:m0 + m])
+        positions.append(data.positions + shift)
+        walls.append(_wall_segments(data) + shift)
+        watched_segments.append(segments[m0 + _rows_of(data.pair, pairs)])
         if data.cell.any() and len(parts) == 1:
             cell = (float(data.cell[0]), float(data.cell[1]))
-    joined = {key: np.concatenate(value) for key, value in arrays.items()}
-    return SceneFrame(positions=joined["positions"], radii=joined["radii"], angles=joined["angles"],
-                      coordination=joined["coordination"].astype(np.int64), pressure=joined["pressure"],
-                      sliding=joined["sliding"], contacts=joined["contacts"].reshape(-1, 2, 2),
-                      contact_force=joined["force"], contact_kind=joined["kind"],
-                      walls=joined["walls"].reshape(-1, 2, 2), cell=cell, watched=joined["watched"].reshape(-1, 2, 2))
+        n0, m0 = n0 + n, m0 + m
+    return SceneFrame(positions=np.concatenate(positions), radii=np.concatenate([d.radii for d, _ in parts]),
+                      angles=np.concatenate([d.angles for d, _ in parts]), coordination=coordination,
+                      pressure=pressure, sliding=sliding, contacts=segments, contact_force=force,
+                      contact_kind=kind, walls=np.concatenate(walls).reshape(-1, 2, 2), cell=cell,
+                      watched=np.concatenate(watched_segments).reshape(-1, 2, 2))
+
+
+@numba.njit(**KERNEL)
+def contact_fields(positions, radii, pair, image, status, normal_force, tangential_force, surface_gap, wall_normal,
+                   cell, shift, coordination, pressure, sliding, segments, force, kind):
+    """One pass over a contact table (rows ``pair`` with ``j >= N`` for wall ``j - N``).
+
+    Per disk: ``coordination`` (touching contacts: stick or sliding), ``pressure`` (sum of |F_n|
+    over its rows / its perimeter), ``sliding`` (one of its contacts slides); the outputs are
+    overwritten. Per row: ``segments`` from the centre of i to its partner (the periodic image
+    next to it) or to the wall point at distance r_i + gap, shifted by ``shift``; ``force``
+    |F|; ``kind`` 2 sliding, 1 tensile (F_n < 0 or a distant cohesive pair), else 0.
+    """
+    n = positions.shape[0]
+    for k in range(n):
+        coordination[k] = 0
+        pressure[k] = 0.0
+        sliding[k] = False
+    for c in range(pair.shape[0]):
+        i, j, s = pair[c, 0], pair[c, 1], status[c]
+        slides = s == STATUS_SLIDE_POS or s == STATUS_SLIDE_NEG
+        touching = slides or s == STATUS_STICK
+        load = abs(normal_force[c])
+        x0, y0 = positions[i, 0], positions[i, 1]
+        if j < n:
+            x1 = positions[j, 0] + image[c, 0] * cell[0]
+            y1 = positions[j, 1] + image[c, 1] * cell[1]
+            coordination[j] += touching
+            pressure[j] += load
+            sliding[j] |= slides
+        else:
+            distance = radii[i] + surface_gap[c]
+            x1 = x0 - distance * wall_normal[j - n, 0]
+            y1 = y0 - distance * wall_normal[j - n, 1]
+        coordination[i] += touching
+        pressure[i] += load
+        sliding[i] |= slides
+        segments[c, 0, 0] = x0 + shift[0]
+        segments[c, 0, 1] = y0 + shift[1]
+        segments[c, 1, 0] = x1 + shift[0]
+        segments[c, 1, 1] = y1 + shift[1]
+        force[c] = math.hypot(normal_force[c], tangential_force[c])
+        kind[c] = 2 if slides else (1 if normal_force[c] < 0.0 or s == STATUS_COHESIVE else 0)
+    for k in range(n):
+        pressure[k] /= 2.0 * math.pi * radii[k]

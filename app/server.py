@@ -81,11 +81,10 @@ class Lab:
         last = -1
         while not self._stop.is_set():
             start = time.perf_counter()
-            seq, frame = self.engine.frame()
-            if seq != last and frame is not None:
-                last = seq
+            last, frame = self.engine.frame(seen=last, timeout=0.2)
+            if frame is not None:
                 self.scene.draw(frame)
-            self._stop.wait(max(0.0, self.scene_interval - (time.perf_counter() - start)))
+                self._stop.wait(max(0.0, self.scene_interval - (time.perf_counter() - start)))
 
     @property
     def url(self) -> str:

@@ -25,7 +25,7 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
                            TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA)
-from .params import ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
+from .params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
 from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
                     ParticleState, WallState, Workspace)
 
@@ -189,6 +189,7 @@ class Snapshot:
     law: ContactLaw
     dt: float
     extra: dict = field(default_factory=dict)
+    wall_modes: tuple[str, ...] = ()
 
 
 class Simulation:
@@ -592,7 +593,7 @@ class Simulation:
             box_lengths=self.box_lengths(),
             periodic=self.periodic, virial=self.cell.virial.copy(), stress=self.stress(), energy=self.energy(),
             law=self.law,
-            dt=self.dt)
+            dt=self.dt, wall_modes=tuple(WALL_MODES[m] for m in self.walls.mode))
 
     def box_lengths(self) -> np.ndarray:
         """Lengths of the domain: periodic lengths, the distance between the walls named

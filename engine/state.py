@@ -300,6 +300,21 @@ class ContactTable(_Copyable):
     def count(self) -> int:
         return int(self.count_array[0])
 
+    def copy(self) -> "ContactTable":
+        """A table of the same capacity holding a copy of the rows in use (the rest is zero: the
+        kernels never read past ``count``), so that a checkpoint costs the contacts, not the
+        capacity."""
+        clone = ContactTable.__new__(ContactTable)
+        clone.capacity = self.capacity
+        clone.count_array = self.count_array.copy()
+        n = self.count
+        for name, _ in self.FIELDS + (("image", None),):
+            old = getattr(self, name)
+            new = np.zeros(old.shape, dtype=old.dtype)
+            new[:n] = old[:n]
+            setattr(clone, name, new)
+        return clone
+
     def grow(self, capacity: int) -> None:
         """Enlarge to ``capacity`` rows, keeping the rows in use."""
         n = self.count

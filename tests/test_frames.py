@@ -44,3 +44,30 @@ def test_parts_side_by_side_are_shifted_and_watched_separately():
     np.testing.assert_allclose(frame.positions[3:], data.positions + [10.0, 0.0])
     np.testing.assert_allclose(frame.watched, [frame.contacts[0]])
     assert build_frame([(data, (0.0, 0.0))], [[(2, 0)]]).watched.shape == (0, 2, 2)  # pairs are ordered i < j
+
+
+def test_frame_from_a_live_simulation_matches_its_snapshot():
+    """The lean copy the engine thread takes gives the frame a full snapshot gives, and the
+    frame's contact segments have the lengths the contact table implies (r_i + r_j + gap for
+    a pair, r_i + gap to a wall)."""
+    from engine.protocols.presets import make_preset, preset_settings
+
+    preset = make_preset("ratchet16", preset_settings("ratchet16"))
+    while preset.sim.time < 12.0:  # past the compression ramp: a packed box
+        preset.advance(5000)
+    sim = preset.sim
+    snap = sim.snapshot()
+    c = snap.contacts
+    assert c.count > 10
+    from_snapshot = FrameData(snap.positions, snap.radii, snap.angles, np.column_stack([c.i, c.j]), c.image, c.status,
+                              c.normal_force, c.tangential_force, c.surface_gap, snap.wall_normals,
+                              snap.wall_offsets, np.zeros(2))
+    lean = FrameData.from_simulation(sim)
+    a, b = build_frame([(from_snapshot, (0.0, 0.0))]), build_frame([(lean, (0.0, 0.0))])
+    for name in ("positions", "coordination", "pressure", "sliding", "contacts", "contact_force", "contact_kind",
+                 "walls"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    n = len(snap.radii)
+    partner = np.where(c.j < n, snap.radii[np.minimum(c.j, n - 1)], 0.0)
+    length = np.linalg.norm(b.contacts[:, 1] - b.contacts[:, 0], axis=1)
+    np.testing.assert_allclose(length, snap.radii[c.i] + partner + c.surface_gap, rtol=1e-9)

@@ -92,6 +92,19 @@ def test_an_invalid_control_is_refused_and_the_run_goes_on(engine):
     wait(lambda: engine.status()["step"] > step)
 
 
+def test_the_engine_copies_a_frame_only_once_the_last_was_taken(engine):
+    seq, frame = engine.frame(timeout=1.0)
+    assert frame is not None and frame.positions.shape == (16, 2)
+    assert engine.frame(seen=seq) == (seq, None)  # nothing new yet: nothing built
+    time.sleep(0.5)  # 15 publishing ticks at 30 frames/s
+    newer, frame = engine.frame(seen=seq)
+    assert newer == seq + 1 and frame is not None  # one copy, made once the first was taken
+    step = engine.status()["step"]
+    later, frame = engine.frame(seen=newer, timeout=2.0)
+    assert later == newer + 1 and frame is not None
+    wait(lambda: engine.status()["step"] > step)
+
+
 def test_pause_step_and_play(engine):
     engine.submit("pause")
     wait(lambda: engine.status()["state"] == "paused")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine import ParameterError
-from engine.protocols.presets import PRESETS, LabSettings, make_preset, mobilisation, preset_settings
+from engine.protocols.presets import PRESETS, LabSettings, PairMaximum, make_preset, mobilisation, preset_settings
 from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 
@@ -39,10 +39,9 @@ def test_ratchet16_watches_the_contacts_that_reach_the_coulomb_cone(ratchet16):
     mu = preset.settings.friction
     assert len(preset.watch) == preset.watch_count
     # chosen during the first cycle: the first watched contact slid (|F_t| reached mu N^e)
-    best = preset._mobilised[preset.watch[0]]
-    assert best == pytest.approx(mu, rel=1e-6)
-    assert all(preset._mobilised[p] >= v for p in preset.watch
-               for q, v in preset._mobilised.items() if q not in preset.watch)
+    mobilised = preset.mobilised.as_dict()
+    assert mobilised[preset.watch[0]] == pytest.approx(mu, rel=1e-6)
+    assert all(mobilised[p] >= v for p in preset.watch for q, v in mobilised.items() if q not in preset.watch)
     # the recorded paths stay inside the cone |F_t| <= mu N^e (ratcheting Eq. 8), on it when sliding
     assert_in_cone(rows["contacts"], mu, 0.0)
 
@@ -166,9 +165,8 @@ def test_compression_preset_reaches_the_imposed_pressure():
 
 def test_watch_disk_toggles_its_contacts():
     preset = make_preset("ratchet16")
-    run_until(preset, lambda p: mobilisation(p.sim), steps=200)
-    contacts = mobilisation(preset.sim)
-    disk = next(iter(contacts))[0]
+    run_until(preset, lambda p: len(mobilisation(p.sim)[1]), steps=200)
+    disk = int(mobilisation(preset.sim)[0][0, 0])
     preset.watch_disk(disk)
     assert preset.watch and all(disk in pair for pair in preset.watch) and not preset.auto_watch
     preset.watch_disk(disk)
@@ -183,3 +181,16 @@ def test_every_preset_runs_and_reports_its_series():
         status = preset.status()
         assert status["preset"] == name and status["settings"]["particles"] >= 1
         assert set(preset.rows()) <= set(cls.series)
+
+
+def test_pair_maximum_keeps_the_largest_value_of_each_pair():
+    rng = np.random.default_rng(3)
+    merged, expected = PairMaximum(), {}
+    for _ in range(5):
+        pairs = rng.integers(0, 6, size=(40, 2))
+        values = rng.random(40)
+        merged.add(pairs, values)
+        for (i, j), v in zip(pairs.tolist(), values):
+            expected[(i, j)] = max(v, expected.get((i, j), -1.0))
+    assert merged.as_dict() == expected
+    assert merged.largest(3) == sorted(expected, key=expected.get, reverse=True)[:3]

@@ -193,27 +193,61 @@ def _contact_rows(sim: Simulation, pairs: list[tuple[int, int]]):
     ``F_n = N^e + N^a`` the normal force without its viscous part: ``N^e - F0`` in contact
     (Gilabert Eq. 4), the attraction alone at a distance. The Coulomb condition
     ``|F_t| <= mu N^e`` (Gilabert Eq. 8) is then the cone ``|F_t| <= mu (F_n + F0)``."""
+    if not pairs:
+        return []
     snap = sim.contact_snapshot()
     n = sim.particles.count
     cohesion = sim.law.cohesion_force
-    lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(snap.i, snap.j))}
+    ordered = [(min(i, j), max(i, j)) if j < n else (i, j) for i, j in pairs]
+    index = {pair: k for k, pair in enumerate(ordered)}
+    keys = np.array(ordered, dtype=np.int64)
     out = []
-    for index, (i, j) in enumerate(pairs):
-        k = lookup.get((min(i, j), max(i, j)) if j < n else (i, j))
-        if k is not None:
-            touching = snap.status[k] in (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
-            normal = snap.elastic_normal_force[k] - cohesion if touching else snap.normal_force[k]
-            out.append((index, float(normal), float(snap.tangential_force[k]), int(snap.status[k])))
-    return out
+    for k in np.flatnonzero(np.isin(pair_codes(snap.i, snap.j), pair_codes(keys[:, 0], keys[:, 1]))):
+        touching = snap.status[k] in (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
+        normal = snap.elastic_normal_force[k] - cohesion if touching else snap.normal_force[k]
+        out.append((index[(int(snap.i[k]), int(snap.j[k]))], float(normal), float(snap.tangential_force[k]),
+                    int(snap.status[k])))
+    return sorted(out)
 
 
-def mobilisation(sim: Simulation) -> dict[tuple[int, int], float]:
-    """|F_t| / N^e of every touching contact with N^e > 0 (it reaches mu on the Coulomb cone)."""
+def pair_codes(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """One int64 per pair (i, j) of the contact table (indices below 2^31)."""
+    return (np.asarray(i, dtype=np.int64) << 32) | np.asarray(j, dtype=np.int64)
+
+
+def mobilisation(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (K, 2) and |F_t| / N^e (K,) of the touching contacts with N^e > 0 (the ratio
+    reaches mu on the Coulomb cone)."""
     snap = sim.contact_snapshot()
     touching = np.isin(snap.status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
     keep = np.flatnonzero(touching & (snap.elastic_normal_force > 0))
     ratio = np.abs(snap.tangential_force[keep]) / snap.elastic_normal_force[keep]
-    return {(int(snap.i[k]), int(snap.j[k])): float(r) for k, r in zip(keep, ratio)}
+    return np.column_stack([snap.i[keep], snap.j[keep]]), ratio
+
+
+class PairMaximum:
+    """The largest value seen for each pair (i, j), merged in bulk (one sort per merge)."""
+
+    def __init__(self):
+        self.codes = np.zeros(0, dtype=np.int64)
+        self.values = np.zeros(0)
+
+    def add(self, pairs: np.ndarray, values: np.ndarray) -> None:
+        codes = np.concatenate([self.codes, pair_codes(pairs[:, 0], pairs[:, 1])])
+        values = np.concatenate([self.values, values])
+        order = np.lexsort((-values, codes))
+        codes, values = codes[order], values[order]
+        first = np.ones(len(codes), dtype=bool)
+        first[1:] = codes[1:] != codes[:-1]
+        self.codes, self.values = codes[first], values[first]
+
+    def as_dict(self) -> dict[tuple[int, int], float]:
+        return {(int(c >> 32), int(c & 0xFFFFFFFF)): float(v) for c, v in zip(self.codes, self.values)}
+
+    def largest(self, count: int) -> list[tuple[int, int]]:
+        """The ``count`` pairs of largest value, largest first."""
+        top = np.argsort(-self.values, kind="stable")[:count]
+        return [(int(c >> 32), int(c & 0xFFFFFFFF)) for c in self.codes[top]]
 
 
 # ---------------------------------------------------------------------------------------------- ratchet
@@ -294,8 +328,7 @@ class RatchetPreset(Preset):
             to_boundary = self._per_cycle - (sim.step - self._cycle_step) % self._per_cycle
             sim.run(min(steps, to_boundary))
             if self._cycle == 0 and self.auto_watch:
-                for pair, ratio in mobilisation(sim).items():
-                    self._mobilised[pair] = max(ratio, self._mobilised.get(pair, 0.0))
+                self.mobilised.add(*mobilisation(sim))
             if (sim.step - self._cycle_step) % self._per_cycle == 0:
                 self._cycle_done()
 
@@ -307,7 +340,7 @@ class RatchetPreset(Preset):
         self._lx0, self._ly0 = self._lengths()
         self.stage = "cycling"
         self._emit("cycles", (0, 0.0))
-        self._mobilised: dict[tuple[int, int], float] = {}
+        self.mobilised = PairMaximum()
 
     def _apply_load(self, load: CyclicLoad) -> None:
         self.load = load
@@ -318,8 +351,7 @@ class RatchetPreset(Preset):
     def _cycle_done(self) -> None:
         self._cycle += 1
         if self._cycle == 1 and self.auto_watch:
-            ranked = sorted(self._mobilised, key=self._mobilised.get, reverse=True)
-            self.watch = ranked[: self.watch_count]
+            self.watch = self.mobilised.largest(self.watch_count)
         self._emit("cycles", (self._cycle, self._gamma()))
         if self._pending_load is not None:
             self._apply_load(self._pending_load)
