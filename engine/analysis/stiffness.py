@@ -1,0 +1,592 @@
+"""The stiffness matrix of a packing and its null space (quasi-rigidity Secs. II-III; ratcheting
+App. A; Gilabert App. A).
+
+Bodies and their velocities (quasi-rigidity Eq. 15): each disk i has ``(v_x, v_y, r_i w_i)``; each
+wall in force mode (a wall pushed by a load, free along its normal) has one, its velocity along its
+normal. Fixed and velocity-driven walls are supports, not bodies. The periodic cell, if any, is held
+fixed (Gilabert Eq. 19 "written here for a fixed cell").
+
+Contacts follow the engine's conventions (:mod:`engine.kernels.laws`, :mod:`engine.kernels.contacts`):
+``n`` points from j to i (from a wall into its disk), ``t = z × n``, ``F_n > 0`` repels,
+``V_n = (v_i - v_j)·n`` and ``V_t = alpha (v_i - v_j)·t - r_i w_i - r_j w_j`` (``alpha = 1`` for the
+Cundall-Strack spring, ``(r_i + r_j)/|r_ij|`` for the alpha-corrected and angle-based ones,
+ratcheting Eqs. 24-25), the torque of ``F_t`` on either disk ``-r F_t``. So the block of c for
+contact alpha and its first body i (quasi-rigidity Eq. 18) is
+
+    ( n_x   alpha t_x )
+    ( n_y   alpha t_y )
+    ( 0        -1     )
+
+and minus the translational rows, with the same last row, for its second body; a wall's single
+entry is ``(-1, 0)`` (it receives ``-F_n`` along its normal). A rolling spring (Gilabert Eq. 10) adds a
+third component per contact, the relative rotation ``w_i - w_j``, whose entries in the third rows are
+``1/r_i`` and ``-1/r_j`` (the moment over the radius).
+
+The contact stiffnesses are tangent ones: ``K_n = dN^e/d(-D_n)`` (``k_n`` for the linear law,
+``k_n chord / l`` for the area law), ``K_t = k_t``, ``K_r = k_r``; a distant cohesive pair has only a
+normal one, ``-F0/D0`` (Gilabert App. A). For a sliding contact the status matrix of quasi-rigidity
+Eq. 24 makes ``dF_t = -sgn(D_t) mu dN^e``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import ParameterError
+from ..state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+
+NORMAL, TANGENTIAL, ROLLING = 0, 1, 2
+ZERO_TOLERANCE = 1e-9
+"""Eigenvalues below this fraction of the largest diagonal entry count as zero (null modes)."""
+DENSE_SIZE = 1500
+"""Matrices up to this order are factorised dense (LAPACK), larger ones sparse (SuperLU, ARPACK)."""
+
+
+@dataclass(frozen=True)
+class Network:
+    """The contacts of one state as the matrices need them (M rows, disks first then walls).
+
+    ``first (M,)`` disk i; ``second (M,)`` disk j or -1 for a wall; ``wall (M,)`` the wall's index or
+    -1; ``normal (M, 2)``; ``alpha (M,)``; ``kn, kt, kr (M,)`` tangent stiffnesses; ``status (M,)``;
+    ``elastic_normal (M,)`` N^e; ``tangential (M,)`` F_t; ``wall_dof (W,)`` the velocity index of
+    each wall (-1 for a support); ``external (n_dof,)`` the load on each velocity component.
+    """
+
+    positions: np.ndarray
+    radii: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    wall: np.ndarray
+    normal: np.ndarray
+    alpha: np.ndarray
+    kn: np.ndarray
+    kt: np.ndarray
+    kr: np.ndarray
+    status: np.ndarray
+    elastic_normal: np.ndarray
+    tangential: np.ndarray
+    friction: float
+    wall_normals: np.ndarray
+    wall_dof: np.ndarray
+    external: np.ndarray
+
+    @property
+    def disks(self) -> int:
+        return int(self.radii.shape[0])
+
+    @property
+    def contacts(self) -> int:
+        return int(self.first.shape[0])
+
+    @property
+    def dof(self) -> int:
+        return 3 * self.disks + int(np.count_nonzero(self.wall_dof >= 0))
+
+    @property
+    def distant(self) -> np.ndarray:
+        return self.status == STATUS_COHESIVE
+
+    @property
+    def sliding(self) -> np.ndarray:
+        """The contacts the dynamics left sliding (on the Coulomb cone)."""
+        return (self.status == STATUS_SLIDE_POS) | (self.status == STATUS_SLIDE_NEG)
+
+    @property
+    def sign_dt(self) -> np.ndarray:
+        """sgn D_t = -sgn F_t (F_t = -K_t D_t); +1 where F_t = 0."""
+        return np.where(self.tangential > 0.0, -1.0, 1.0)
+
+
+def _tangent_normal_stiffness(law, overlap, ri, rj, is_wall) -> np.ndarray:
+    """dN^e / d overlap: k_n (linear law) or k_n chord / l (area law: dA/d overlap is the chord)."""
+    if law.normal_model == "linear":
+        return np.full(overlap.shape, law.normal_stiffness)
+    distance = np.where(is_wall, ri - overlap, ri + rj - overlap)  # wall: centre to wall line
+    along = np.where(is_wall, distance, (distance ** 2 + ri ** 2 - rj ** 2) / (2.0 * np.maximum(distance, 1e-300)))
+    chord = 2.0 * np.sqrt(np.maximum(ri ** 2 - along ** 2, 0.0))
+    length = np.where(is_wall, 2.0 * ri, ri + rj)
+    return law.normal_stiffness * chord / length
+
+
+def network(snapshot, cell_lengths=None) -> Network:
+    """The :class:`Network` of an :class:`engine.simulation.Snapshot`.
+
+    Force-mode walls are bodies; their load is taken as what balances the disks' push
+    (``-wall_forces``), the load of a packing in equilibrium.
+    """
+    c = snapshot.contacts
+    law = snapshot.law
+    n = len(snapshot.radii)
+    keep = np.isin(c.status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG, STATUS_COHESIVE))
+    i, j, image = c.i[keep], c.j[keep], c.image[keep]
+    is_wall = j >= n
+    wall = np.where(is_wall, j - n, -1)
+    second = np.where(is_wall, -1, j)
+    jj = np.where(is_wall, 0, j)
+    cell = np.where(np.array(snapshot.periodic), snapshot.cell_lengths, 0.0) if cell_lengths is None else cell_lengths
+    branch = snapshot.positions[i] - snapshot.positions[jj] - image * cell
+    distance = np.hypot(branch[:, 0], branch[:, 1])
+    normal = np.where(is_wall[:, None], snapshot.wall_normals[np.maximum(wall, 0)] if len(snapshot.wall_normals)
+                      else 0.0, branch / np.maximum(distance, 1e-300)[:, None])
+    ri, rj = snapshot.radii[i], np.where(is_wall, 0.0, snapshot.radii[jj])
+    alpha = np.ones(len(i)) if law.tangential_model == "cundall-strack" else np.where(is_wall, 1.0, (ri + rj) / np.maximum(distance, 1e-300))
+    gap = c.surface_gap[keep]
+    status = c.status[keep]
+    distant = status == STATUS_COHESIVE
+    kn = np.where(distant, -law.cohesion_force / law.cohesion_range if law.cohesion_range > 0 else 0.0,
+                  _tangent_normal_stiffness(law, np.maximum(-gap, 0.0), ri, rj, is_wall))
+    kt = np.where(distant, 0.0, law.tangential_stiffness)
+    kr = np.where(distant, 0.0, law.rolling_stiffness)
+    modes = getattr(snapshot, "wall_modes", ()) or ("fixed",) * len(snapshot.wall_normals)
+    mobile = np.array([m == "force" for m in modes], dtype=bool)
+    wall_dof = np.full(len(modes), -1)
+    wall_dof[mobile] = 3 * n + np.arange(int(mobile.sum()))
+    external = np.zeros(3 * n + int(mobile.sum()))
+    external[wall_dof[mobile]] = -np.asarray(snapshot.wall_forces)[mobile]
+    return Network(snapshot.positions, snapshot.radii, i, second, wall, normal, alpha, kn, kt, kr, status,
+                   c.elastic_normal_force[keep], c.tangential_force[keep], float(law.friction),
+                   np.asarray(snapshot.wall_normals), wall_dof, external)
+
+
+def compatibility(net: Network, components=(NORMAL, TANGENTIAL)) -> sp.csr_matrix:
+    """c (n_dof × len(components) M): column ``len(components) alpha + k`` is component
+    ``components[k]`` of contact alpha (quasi-rigidity Eqs. 17-19; cᵀ maps velocities to the
+    relative velocities V, Eq. 23)."""
+    m, width = net.contacts, len(components)
+    rows, cols, values = [], [], []
+    idx = np.arange(m)
+    i, j, wall = net.first, net.second, net.wall
+    pair = j >= 0
+    tx, ty = -net.normal[:, 1], net.normal[:, 0]
+    for k, component in enumerate(components):
+        col = width * idx + k
+        if component == NORMAL:
+            entries = [(3 * i, net.normal[:, 0]), (3 * i + 1, net.normal[:, 1])]
+            rows += [3 * j[pair], 3 * j[pair] + 1]
+            cols += [col[pair]] * 2
+            values += [-net.normal[pair, 0], -net.normal[pair, 1]]
+            walls = ~pair & (net.wall_dof[np.maximum(wall, 0)] >= 0) if len(net.wall_dof) else np.zeros(m, bool)
+            rows.append(net.wall_dof[wall[walls]])
+            cols.append(col[walls])
+            values.append(-np.ones(int(walls.sum())))
+        elif component == TANGENTIAL:
+            entries = [(3 * i, net.alpha * tx), (3 * i + 1, net.alpha * ty), (3 * i + 2, -np.ones(m))]
+            rows += [3 * j[pair], 3 * j[pair] + 1, 3 * j[pair] + 2]
+            cols += [col[pair]] * 3
+            values += [-(net.alpha * tx)[pair], -(net.alpha * ty)[pair], -np.ones(int(pair.sum()))]
+        elif component == ROLLING:
+            entries = [(3 * i + 2, 1.0 / net.radii[i])]
+            rows.append(3 * j[pair] + 2)
+            cols.append(col[pair])
+            values.append(-1.0 / net.radii[j[pair]])
+        else:
+            raise ParameterError("contact component", component, "NORMAL, TANGENTIAL or ROLLING")
+        for r, v in entries:
+            rows.append(r)
+            cols.append(col)
+            values.append(v)
+    return sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(net.dof, width * m))
+
+
+def components(net: Network) -> tuple[int, ...]:
+    """The relative motions that carry forces: normal always, tangential with friction, rolling
+    with a rolling spring (Gilabert App. A)."""
+    out = (NORMAL,)
+    if net.friction > 0.0 and np.any(net.kt > 0.0):
+        out += (TANGENTIAL,)
+    if np.any(net.kr > 0.0):
+        out += (ROLLING,)
+    return out
+
+
+def stiffness_matrix(net: Network, sliding: np.ndarray | None = None) -> sp.csr_matrix:
+    """k = c K S(𝕊) cᵀ (quasi-rigidity Eqs. 21-25, 30), n_dof × n_dof, for the sliding set
+    ``sliding`` (M booleans; default: the statuses the dynamics left). The force increment on the
+    bodies for velocities v is ``-k v`` and the quasi-static balance is ``df_ext/dt = k v`` (Eq. 39)."""
+    sliding = net.sliding if sliding is None else np.asarray(sliding, dtype=bool)
+    if sliding.shape != (net.contacts,):
+        raise ParameterError("sliding", f"shape {sliding.shape}", f"{net.contacts} booleans, one per contact")
+    comps = (NORMAL, TANGENTIAL, ROLLING)
+    c = compatibility(net, comps)
+    m = net.contacts
+    idx = 3 * np.arange(m)
+    sticking = ~sliding & ~net.distant
+    # K S per contact: rows (normal, tangential, rolling) of dF = -(K S) V
+    rows = [idx, idx + 1, idx + 2]
+    cols = [idx, idx + 1, idx + 2]
+    values = [net.kn, np.where(sticking, net.kt, 0.0), net.kr]
+    slide = np.flatnonzero(sliding)
+    rows.append(idx[slide] + 1)
+    cols.append(idx[slide])
+    values.append(-net.friction * net.kn[slide] * net.sign_dt[slide])
+    ks = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * m, 3 * m))
+    return (c @ ks @ c.T).tocsr()
+
+
+def relative_velocities(net: Network, v: np.ndarray) -> np.ndarray:
+    """V = cᵀ v as (M, 3): normal, tangential and rolling components (quasi-rigidity Eq. 23)."""
+    return (compatibility(net, (NORMAL, TANGENTIAL, ROLLING)).T @ v).reshape(-1, 3)
+
+
+def quadratic_form(net: Network, v: np.ndarray, sliding: np.ndarray | None = None) -> float:
+    """Q(v, 𝕊) = vᵀ k v as the contact sum of quasi-rigidity Eqs. 43-45 (plus K_r V_r² per
+    rolling spring)."""
+    sliding = net.sliding if sliding is None else np.asarray(sliding, dtype=bool)
+    rel = relative_velocities(net, v)
+    vn, vt, vr = rel[:, 0], rel[:, 1], rel[:, 2]
+    stick = net.kn * vn ** 2 + np.where(net.distant, 0.0, net.kt) * vt ** 2
+    slide = net.kn * vn ** 2 - net.friction * net.kn * vt * vn * net.sign_dt
+    return float(np.sum(np.where(sliding, slide, stick) + net.kr * vr ** 2))
+
+
+def count_below(matrix: sp.spmatrix, threshold: float) -> int:
+    """Number of eigenvalues of the symmetric ``matrix`` below ``threshold`` (Sylvester's law of
+    inertia: the negative pivots of an LDLᵀ factorisation of ``matrix - threshold I``, taken from a
+    sparse LU with symmetric ordering and diagonal pivots)."""
+    n = matrix.shape[0]
+    if n == 0:
+        return 0
+    if n <= DENSE_SIZE:
+        return int(np.count_nonzero(np.linalg.eigvalsh(matrix.toarray()) < threshold))
+    shifted = (matrix - threshold * sp.identity(n, format="csc")).tocsc()
+    lu = spla.splu(shifted, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                   options={"SymmetricMode": True})
+    return int(np.count_nonzero(lu.U.diagonal() < 0.0))
+
+
+def null_space(matrix: sp.spmatrix, tolerance: float = ZERO_TOLERANCE, vectors: bool = True,
+               max_vectors: int = 400) -> tuple[int, np.ndarray | None]:
+    """Dimension and (if asked and at most ``max_vectors``) an orthonormal basis (n, d) of the
+    null space of a symmetric positive semi-definite ``matrix``: eigenvalues below ``tolerance``
+    times its largest diagonal entry."""
+    n = matrix.shape[0]
+    scale = float(np.abs(matrix.diagonal()).max()) if n else 0.0
+    if scale == 0.0:
+        return n, (np.eye(n) if vectors and n <= max_vectors else None)
+    threshold = tolerance * scale
+    count = count_below(matrix, threshold)
+    if not vectors or count == 0 or count > max_vectors:
+        return count, (np.zeros((n, 0)) if vectors and count == 0 else None)
+    if n <= DENSE_SIZE or count >= n - 1:
+        values, basis = np.linalg.eigh(matrix.toarray())
+        return count, basis[:, :count]
+    values, basis = spla.eigsh(matrix.tocsc(), k=count, sigma=-threshold, which="LM")
+    return count, basis[:, np.argsort(values)]
+
+
+@dataclass(frozen=True)
+class Rigidity:
+    """Counts of Gilabert App. A for the rigidity matrix G (M × N_f): ``degrees_of_freedom`` N_f,
+    ``constraints`` M (relative motions that carry forces), ``floppy_modes`` K = dim null G,
+    ``hyperstaticity`` H = dim null Gᵀ (self-stress states), ``rank``; N_f + H = M + K holds when the
+    two null spaces were measured consistently (``balanced``)."""
+
+    degrees_of_freedom: int
+    constraints: int
+    floppy_modes: int
+    hyperstaticity: int
+    rank: int
+
+    @property
+    def balanced(self) -> bool:
+        return self.degrees_of_freedom + self.hyperstaticity == self.constraints + self.floppy_modes
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__, balanced=self.balanced)
+
+
+def rigidity_matrix(net: Network) -> sp.csr_matrix:
+    """G = cᵀ restricted to the relative motions that carry forces (Gilabert Eq. A3): normal
+    components of every interaction; tangential ones of touching contacts with friction; rolling
+    ones with a rolling spring. Without friction nor rolling resistance the rotations are left out
+    (N_f = 2N, Gilabert Eq. 22)."""
+    comps = components(net)
+    c = compatibility(net, comps).T.tocsr()
+    keep = np.ones((net.contacts, len(comps)), dtype=bool)
+    keep[:, 1:] = ~net.distant[:, None]
+    g = c[np.flatnonzero(keep.ravel())]
+    if comps == (NORMAL,):
+        translations = np.concatenate([np.flatnonzero((np.arange(3 * net.disks) % 3) != 2),
+                                       np.arange(3 * net.disks, net.dof)])
+        g = g[:, translations]
+    return g.tocsr()
+
+
+def rigidity(net: Network, tolerance: float = ZERO_TOLERANCE) -> Rigidity:
+    """K from the null space of GᵀG and H from that of GGᵀ, each by its own factorisation."""
+    g = rigidity_matrix(net)
+    m, nf = g.shape
+    floppy, _ = null_space((g.T @ g).tocsc(), tolerance, vectors=False)
+    stress, _ = null_space((g @ g.T).tocsc(), tolerance, vectors=False)
+    return Rigidity(nf, m, floppy, stress, nf - floppy)
+
+
+def _regularised_solve(matrix: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """v with (matrix + delta I) v = rhs, delta 1e-10 of the largest diagonal entry: the solution
+    of matrix v = rhs without components along its null modes (when rhs leaves them alone)."""
+    n = matrix.shape[0]
+    delta = 1e-10 * float(np.abs(matrix.diagonal()).max() or 1.0)
+    if n <= DENSE_SIZE:
+        return np.linalg.solve(matrix.toarray() + delta * np.eye(n), rhs)
+    shifted = (matrix + delta * sp.identity(n, format="csc")).tocsc()
+    return spla.splu(shifted, permc_spec="MMD_AT_PLUS_A").solve(np.asarray(rhs, dtype=float))
+
+
+def response(net: Network, load_increment: np.ndarray, sliding: np.ndarray | None = None) -> np.ndarray:
+    """The quasi-static velocities v for a load rate df_ext/dt (ratcheting Eqs. A3-A6; quasi-rigidity
+    Eq. 39: df_ext/dt = k v), the contacts of ``sliding`` sliding (default: the dynamics' statuses)."""
+    load_increment = np.asarray(load_increment, dtype=float)
+    if load_increment.shape != (net.dof,):
+        raise ParameterError("load increment", f"shape {load_increment.shape}",
+                             f"one value per velocity component: ({net.dof},)")
+    return _regularised_solve(stiffness_matrix(net, sliding), load_increment)
+
+
+def rattler_disks(net: Network) -> np.ndarray:
+    """Disks with no interaction at all: each brings three null modes of k (quasi-rigidity Sec. III E)."""
+    touched = np.zeros(net.disks, dtype=bool)
+    touched[net.first] = True
+    touched[net.second[net.second >= 0]] = True
+    return np.flatnonzero(~touched)
+
+
+def _rigid_motions(net: Network) -> np.ndarray:
+    """(n_dof, 3) translations along x and y and the rotation about the centroid of everything,
+    each disk turning with it (walls translate along their normal; a rotation moves no wall)."""
+    n = net.disks
+    out = np.zeros((net.dof, 3))
+    for axis in range(2):
+        out[axis: 3 * n: 3, axis] = 1.0
+        mobile = net.wall_dof >= 0
+        out[net.wall_dof[mobile], axis] = net.wall_normals[mobile, axis]
+    if not len(net.wall_normals):
+        centred = net.positions - net.positions.mean(axis=0)
+        out[0: 3 * n: 3, 2] = -centred[:, 1]
+        out[1: 3 * n: 3, 2] = centred[:, 0]
+        out[2: 3 * n: 3, 2] = net.radii
+    return out
+
+
+def _shared_dimension(basis: np.ndarray, vectors: np.ndarray, tolerance: float = 1e-6) -> int:
+    """Dimension of the intersection of span(basis) (orthonormal columns) with span(vectors)."""
+    if basis.shape[1] == 0 or vectors.shape[1] == 0:
+        return 0
+    q, r = np.linalg.qr(vectors)
+    q = q[:, np.abs(np.diag(r)) > tolerance * max(1.0, np.abs(r).max())]
+    if q.shape[1] == 0:
+        return 0
+    return int(np.count_nonzero(np.linalg.svd(q.T @ basis, compute_uv=False) > 1.0 - tolerance))
+
+
+@dataclass(frozen=True)
+class Mechanisms:
+    """Null modes of k (quasi-rigidity Sec. III E) and what they are.
+
+    ``count`` zero modes, of which ``rigid_body`` are motions of the whole, ``rattlers`` those of
+    disks without interactions (three each), ``unexcited`` those the load increment does not
+    excite (f_ext · v* = 0); ``collapse`` is true when the load has a component along the rest:
+    then Eq. 39 has no solution and the packing collapses (``collapse_mode``, the excited motion).
+    ``unstable`` counts directions with Q = vᵀkv < 0 (motion through an instability). ``modes``
+    (n_dof, count - 3 x rattler disks) is a basis of the modes outside the rattlers (None if too
+    many)."""
+
+    count: int
+    rigid_body: int
+    rattlers: int
+    unexcited: int
+    collapse: bool
+    unstable: int
+    modes: np.ndarray | None
+    collapse_mode: np.ndarray | None
+
+    def as_dict(self) -> dict:
+        return {"null_modes": self.count, "rigid_body_modes": self.rigid_body, "rattler_modes": self.rattlers,
+                "unexcited_mechanisms": self.unexcited, "collapse": self.collapse, "unstable_directions": self.unstable}
+
+
+def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: np.ndarray | None = None,
+               tolerance: float = ZERO_TOLERANCE, max_vectors: int = 400) -> Mechanisms:
+    """Null modes of the symmetric part of k(𝕊) and their classification (quasi-rigidity Sec. III E)
+    for the load increment (default: the current load, ``net.external``). The three modes of each
+    disk without interactions are counted without computing them."""
+    load = net.external if load_increment is None else np.asarray(load_increment, dtype=float)
+    k = stiffness_matrix(net, sliding)
+    sym = ((k + k.T) * 0.5).tocsr()
+    loose = rattler_disks(net)
+    keep = np.ones(net.dof, dtype=bool)
+    for offset in range(3):
+        keep[3 * loose + offset] = False
+    index = np.flatnonzero(keep)
+    reduced = sym[index][:, index].tocsc()
+    scale = float(np.abs(reduced.diagonal()).max()) if len(index) else 0.0
+    unstable = count_below(reduced, -tolerance * scale) if scale > 0 else 0
+    zero, basis = null_space(reduced, tolerance, vectors=True, max_vectors=max_vectors)
+    zero -= unstable
+    modes = None
+    rigid = unexcited = 0
+    collapse = False
+    collapse_mode = None
+    if basis is not None:
+        modes = np.zeros((net.dof, basis.shape[1]))
+        modes[index] = basis
+        if unstable:
+            modes = modes[:, unstable:]
+        rigid_vectors = _rigid_motions(net)
+        rigid_vectors[~keep] = 0.0
+        rigid = _shared_dimension(modes, rigid_vectors)
+        along = modes.T @ load
+        size = np.linalg.norm(load)
+        collapse = bool(size > 0 and np.linalg.norm(along) > 1e-8 * size)
+        unexcited = zero - rigid - int(collapse)
+        if collapse:
+            collapse_mode = modes @ (along / np.linalg.norm(along))
+    return Mechanisms(zero + 3 * len(loose), rigid, 3 * len(loose), unexcited, collapse, unstable, modes,
+                      collapse_mode)
+
+
+# ------------------------------------------------------------------------------------ contact status
+def critical_contacts(net: Network, tolerance: float = 1e-6) -> np.ndarray:
+    """Touching contacts on the Coulomb cone: | |F_t| - mu N^e | <= tolerance mu N^e (quasi-rigidity
+    Sec. II C), with mu finite and N^e > 0."""
+    if not np.isfinite(net.friction) or net.friction <= 0.0:
+        return np.zeros(0, dtype=np.int64)
+    limit = net.friction * net.elastic_normal
+    on_cone = (np.abs(np.abs(net.tangential) - limit) <= tolerance * limit) & (limit > 0.0) & ~net.distant
+    return np.flatnonzero(on_cone)
+
+
+def v_tilde(net: Network, v: np.ndarray) -> np.ndarray:
+    """Ṽ = mu (K_n/K_t) V_n + V_t sgn D_t per contact (quasi-rigidity Eq. 10): dF̃/dt = -K_t Ṽ for
+    a non-sliding contact (Eq. 11), so Ṽ > 0 would carry it out of the cone."""
+    rel = relative_velocities(net, v)
+    kt = np.where(net.kt > 0.0, net.kt, np.inf)
+    return net.friction * net.kn / kt * rel[:, 0] + rel[:, 1] * net.sign_dt
+
+
+def _sliding_set(net: Network, critical: np.ndarray, bits) -> np.ndarray:
+    """The dynamics' statuses with those of the ``critical`` contacts set to ``bits``."""
+    sliding = net.sliding.copy()
+    sliding[critical] = np.asarray(bits, dtype=bool)
+    return sliding
+
+
+def consistency(net: Network, load_increment: np.ndarray, critical: np.ndarray, bits) -> tuple[np.ndarray, np.ndarray]:
+    """For the state ``bits`` (1 = sliding) of the critical contacts: the quasi-static velocities and
+    the consistency of each critical contact with the principle of minimum sliding (sliding needs
+    Ṽ > 0, non-sliding Ṽ <= 0)."""
+    bits = np.asarray(bits, dtype=bool)
+    v = response(net, load_increment, _sliding_set(net, critical, bits))
+    vt = v_tilde(net, v)[critical]
+    return v, np.where(bits, vt > 0.0, vt <= 0.0)
+
+
+@dataclass(frozen=True)
+class StatusSolution:
+    """The globally consistent state found by :func:`solve_status`: ``sliding`` (M booleans),
+    ``critical`` contact indices, ``iterations``, the velocities ``v``, and whether the dynamics'
+    own statuses agree on the critical contacts (``agrees_with_dynamics``)."""
+
+    sliding: np.ndarray
+    critical: np.ndarray
+    iterations: int
+    velocities: np.ndarray
+    agrees_with_dynamics: bool
+
+
+def solve_status(net: Network, load_increment: np.ndarray, critical: np.ndarray | None = None,
+                 max_iterations: int | None = None) -> StatusSolution:
+    """The principle of minimum sliding applied iteratively (quasi-rigidity Sec. II C): start from
+    the dynamics' statuses, compute the velocities, flip the critical contact whose consistency is
+    most violated, and repeat until every critical contact is consistent."""
+    critical = critical_contacts(net) if critical is None else np.asarray(critical, dtype=np.int64)
+    start = net.sliding[critical]
+    bits = start.copy()
+    limit = max_iterations if max_iterations is not None else 20 * max(1, len(critical))
+    for iteration in range(limit + 1):
+        v, ok = consistency(net, load_increment, critical, bits)
+        if ok.all():
+            return StatusSolution(_sliding_set(net, critical, bits), critical, iteration, v,
+                                  bool(np.array_equal(bits, start)))
+        vt = v_tilde(net, v)[critical]
+        worst = int(np.argmax(np.where(ok, -np.inf, np.abs(vt))))
+        bits[worst] = not bits[worst]
+    raise ParameterError("contact status", f"no consistent state after {limit} flips",
+                         "a packing whose states are all stable (quasi-rigidity Eq. 41); check with enumerate_states")
+
+
+@dataclass(frozen=True)
+class StatusEnumeration:
+    """Every state of the critical contacts (quasi-rigidity Sec. II D): ``states_checked`` = 2^M_c,
+    ``consistent_states`` (bit strings, contact order of ``critical``, 1 = sliding), ``unstable_states``
+    (Q(v, 𝕊) < 0 for some v: the theorem's premise fails there), and ``bijective``: whether the
+    consistency map C of Eq. 5 is a bijection."""
+
+    critical: np.ndarray
+    states_checked: int
+    consistent_states: list[str]
+    unstable_states: list[str]
+    bijective: bool
+
+    def as_dict(self) -> dict:
+        return {"critical_contacts": len(self.critical), "states_checked": self.states_checked,
+                "consistent_states": self.consistent_states, "unstable_states": self.unstable_states,
+                "bijective": self.bijective}
+
+
+MAX_ENUMERATED = 16
+
+
+def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndarray | None = None,
+                     tolerance: float = ZERO_TOLERANCE) -> StatusEnumeration:
+    """All 2^M_c states of the M_c <= 16 critical contacts: the consistency map C (Eq. 5), whether it
+    is a bijection, the consistent states, and the states that are unstable (the symmetric part of
+    k(𝕊) has a negative eigenvalue, outside the disks without interactions).
+
+    k(𝕊) is assembled as k(all critical stuck) plus, for each sliding critical contact, its own
+    change c_a (K S_slide - K S_stick)_a c_aᵀ (quasi-rigidity Eq. 24 changes one block), so a state
+    costs one dense solve and one symmetric eigenvalue problem."""
+    critical = critical_contacts(net) if critical is None else np.asarray(critical, dtype=np.int64)
+    mc = len(critical)
+    if mc > MAX_ENUMERATED:
+        raise ParameterError("critical contacts", mc, f"at most {MAX_ENUMERATED} to enumerate 2^M_c states")
+    if net.dof > DENSE_SIZE:
+        raise ParameterError("velocity components", net.dof, f"at most {DENSE_SIZE} to enumerate states densely")
+    load = np.asarray(load_increment, dtype=float)
+    stuck = np.zeros(net.contacts, dtype=bool)
+    stuck[:] = net.sliding
+    stuck[critical] = False
+    base = stiffness_matrix(net, stuck).toarray()
+    changes = []
+    for a in critical:
+        one = stuck.copy()
+        one[a] = True
+        changes.append(stiffness_matrix(net, one).toarray() - base)
+    c = compatibility(net, (NORMAL, TANGENTIAL, ROLLING)).toarray()
+    loose = rattler_disks(net)
+    keep = np.ones(net.dof, dtype=bool)
+    for offset in range(3):
+        keep[3 * loose + offset] = False
+    delta = 1e-10 * float(np.abs(np.diag(base)).max() or 1.0)
+    scale = float(np.abs(np.diag(base)[keep]).max()) if keep.any() else 0.0
+    kt = np.where(net.kt[critical] > 0.0, net.kt[critical], np.inf)
+    images, consistent, unstable = set(), [], []
+    for code in range(2 ** mc):
+        bits = np.array([(code >> b) & 1 for b in range(mc)], dtype=bool)
+        k = base + sum((changes[b] for b in np.flatnonzero(bits)), np.zeros_like(base))
+        v = np.linalg.solve(k + delta * np.eye(net.dof), load)
+        rel = (c.T @ v).reshape(-1, 3)[critical]
+        vt = net.friction * net.kn[critical] / kt * rel[:, 0] + rel[:, 1] * net.sign_dt[critical]
+        ok = np.where(bits, vt > 0.0, vt <= 0.0)
+        images.add(tuple(ok))
+        label = "".join("1" if b else "0" for b in bits)
+        if ok.all():
+            consistent.append(label)
+        sym = 0.5 * (k + k.T)[np.ix_(keep, keep)]
+        if scale > 0 and np.linalg.eigvalsh(sym)[0] < -tolerance * scale:
+            unstable.append(label)
+    return StatusEnumeration(critical, 2 ** mc, consistent, unstable, len(images) == 2 ** mc)

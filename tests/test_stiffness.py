@@ -1,0 +1,198 @@
+"""The stiffness matrix k = c K S cᵀ against the engine's own forces, the stability form as a contact
+sum, the null-space count against dense linear algebra, and the textbook rigidity cases."""
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
+                                       network)
+from engine.params import ContactLaw, Integration
+from engine.protocols.presets import make_preset, preset_settings
+from engine.simulation import Simulation
+from engine.state import WALL_FORCE, WALL_VELOCITY, ParticleState
+
+
+@functools.cache
+def _packed_state(model: str):
+    preset = make_preset("ratchet16", preset_settings("ratchet16", tangential_model=model))
+    while preset.sim.time < 12.0:
+        preset.advance(5000)
+    return preset.sim
+
+
+def packed_box(model: str, friction: float = 0.3) -> Simulation:
+    """The 16-disk ratchet box after its compression ramp (a packing with wall contacts), with
+    the damping switched off so that forces depend on positions and springs only."""
+    sim = _packed_state(model).clone(damping_ratio=0.0, tangential_damping=0.0, friction=friction)
+    sim.run(1)
+    return sim
+
+
+def generalized_forces(sim: Simulation, mobile: np.ndarray) -> np.ndarray:
+    """(f_x, f_y, torque / r) of each disk, then the normal force on each mobile wall."""
+    p = sim.particles
+    disks = np.column_stack([p.force, p.torque / p.radius]).ravel()
+    return np.concatenate([disks, sim.walls.particle_force[mobile]])
+
+
+def impose(sim: Simulation, mobile: np.ndarray, dx: np.ndarray) -> None:
+    """One step in which every disk and mobile wall moves by ``dx`` (kinematically: the disks
+    have no inertia left, the mobile walls are driven for the step)."""
+    p, h, n = sim.particles, sim.dt, sim.particles.count
+    p.velocity[:] = dx[: 3 * n].reshape(n, 3)[:, :2] / h
+    p.omega[:] = dx[: 3 * n].reshape(n, 3)[:, 2] / p.radius / h
+    sim.walls.mode[mobile] = WALL_VELOCITY
+    sim.walls.velocity[mobile] = dx[3 * n:] / h
+    sim.run(1)
+    sim.walls.mode[mobile] = WALL_FORCE
+    sim.walls.velocity[mobile] = 0.0
+
+
+@pytest.mark.parametrize("model", ["cundall-strack", "alpha", "angle"])
+@pytest.mark.parametrize("sliding", [False, True])
+def test_k_predicts_the_force_change_of_a_small_displacement(model, sliding):
+    """Impose a small displacement dx on every body (disks move and turn at prescribed velocities
+    for one step h; mobile walls too), statuses frozen: the engine's forces change by -k dx. In
+    the sliding case every disk was first turned the same way until its contacts slid
+    (mu = 0.05), and dx keeps turning them."""
+    sim = packed_box(model, friction=0.05 if sliding else 0.3)
+    mobile = sim.walls.mode == WALL_FORCE
+    n = sim.particles.count
+    p = sim.particles
+    p.inv_mass[:] = 0.0
+    p.inv_inertia[:] = 0.0
+    snap = sim.snapshot()
+    overlap = -snap.contacts.surface_gap[snap.contacts.surface_gap < 0].mean()
+    turn = np.zeros(3 * n + int(mobile.sum()))
+    if sliding:
+        turn[2: 3 * n: 3] = 0.02 * overlap
+        for _ in range(10):
+            impose(sim, mobile, turn)
+    impose(sim, mobile, np.zeros_like(turn))  # forces at x, nothing moving
+    before = generalized_forces(sim, mobile)
+    net = network(sim.snapshot())
+    assert net.contacts > 20 and net.dof == 3 * n + 2
+    rng = np.random.default_rng(7)
+    dx = turn + rng.normal(size=net.dof) * 1e-3 * overlap
+    impose(sim, mobile, dx)
+    after = network(sim.snapshot())
+    assert np.array_equal(after.first, net.first) and np.array_equal(after.second, net.second)
+    df = generalized_forces(sim, mobile) - before
+    predicted = -(stiffness_matrix(net, after.sliding) @ dx)
+    assert np.linalg.norm(df - predicted) < 1e-2 * np.linalg.norm(df)
+    if sliding:
+        assert after.sliding.sum() > net.contacts // 2
+        wrong = stiffness_matrix(net, np.zeros(net.contacts, dtype=bool))  # as if all stuck
+        assert np.linalg.norm(df + wrong @ dx) > 0.1 * np.linalg.norm(df)
+
+
+def test_quadratic_form_is_the_contact_sum_of_eqs_43_to_45():
+    sim = packed_box("cundall-strack")
+    net = network(sim.snapshot())
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        sliding = rng.random(net.contacts) < 0.3
+        v = rng.normal(size=net.dof)
+        k = stiffness_matrix(net, sliding)
+        assert quadratic_form(net, v, sliding) == pytest.approx(v @ (k @ v), rel=1e-10)
+
+
+def test_null_space_count_matches_dense_linear_algebra():
+    rng = np.random.default_rng(5)
+    for rank in (0, 3, 17, 40):
+        a = rng.normal(size=(40, rank))
+        matrix = a @ a.T
+        from scipy import sparse
+        count, basis = null_space(sparse.csc_matrix(matrix))
+        assert count == 40 - np.linalg.matrix_rank(matrix)
+        if count:
+            assert np.abs(matrix @ basis).max() <= 1e-8 * np.abs(matrix).max()
+
+
+def glued(positions, radii, law: ContactLaw) -> Network:
+    """The network of disks placed at ``positions``, each touching pair overlapped by 1e-6."""
+    positions = np.asarray(positions, dtype=float)
+    state = ParticleState(positions, np.asarray(radii, dtype=float), density=1.0)
+    sim = Simulation(state, law)
+    sim.run(1)
+    return network(sim.snapshot())
+
+
+def test_a_triangle_of_disks_is_isostatic_and_a_double_triangle_has_h_1():
+    law = ContactLaw(friction=0.5)
+    d = 2.0 - 1e-6  # centre distance of touching unit disks, overlapped by 1e-6
+    triangle = [(0.0, 0.0), (d, 0.0), (d / 2, d * math.sqrt(3) / 2)]
+    r = rigidity(glued(triangle, [1.0] * 3, law))
+    assert (r.degrees_of_freedom, r.constraints, r.floppy_modes, r.hyperstaticity) == (9, 6, 3, 0)
+    double = triangle + [(3 * d / 2, d * math.sqrt(3) / 2)]  # Gilabert Figs. 13, 18: 4 disks, 5 contacts
+    r = rigidity(glued(double, [1.0] * 4, law))
+    assert (r.degrees_of_freedom, r.constraints, r.floppy_modes, r.hyperstaticity) == (12, 10, 3, 1)
+    assert r.balanced
+
+
+def test_frictionless_cohesive_aggregates_have_4_minus_z_n_over_2_floppy_modes():
+    """A loop-free aggregate (each disk glued to one earlier disk) is not hyperstatic, so by
+    Gilabert Eq. 22 its floppy modes number 2N - N_c = (4 - z) N / 2."""
+    rng = np.random.default_rng(11)
+    law = ContactLaw(friction=0.0, cohesion_force=1.0, cohesion_range=1e-9)
+    positions = [np.zeros(2)]
+    while len(positions) < 30:
+        parent = positions[rng.integers(len(positions))]
+        angle = rng.uniform(0, 2 * np.pi)
+        candidate = parent + (2.0 - 1e-6) * np.array([np.cos(angle), np.sin(angle)])
+        if all(np.linalg.norm(candidate - q) > 2.05 for q in positions if q is not parent):
+            positions.append(candidate)
+    net = glued(positions, [1.0] * 30, law)
+    r = rigidity(net)
+    n, contacts = 30, net.contacts
+    z = 2.0 * contacts / n
+    assert contacts == n - 1 and r.hyperstaticity == 0
+    assert r.floppy_modes == 2 * n - contacts == round((4 - z) * n / 2)
+    assert r.balanced
+
+
+def turned_box(turns: int, seed: int) -> Network:
+    """The 16-disk box at mu = 0.05 after ``turns`` steps of every disk turning the same way (and a
+    random jiggle), so that part of its contacts reached the Coulomb cone."""
+    sim = packed_box("cundall-strack", friction=0.05)
+    mobile = sim.walls.mode == WALL_FORCE
+    n = sim.particles.count
+    sim.particles.inv_mass[:] = 0.0
+    sim.particles.inv_inertia[:] = 0.0
+    overlap = -sim.snapshot().contacts.surface_gap.min()
+    rng = np.random.default_rng(seed)
+    for _ in range(turns):
+        dx = rng.normal(size=3 * n + 2) * 0.01 * overlap
+        dx[2: 3 * n: 3] += 0.004 * overlap
+        impose(sim, mobile, dx)
+    return network(sim.snapshot())
+
+
+def deviatoric_load(net: Network, snap_walls=("right", "top")) -> np.ndarray:
+    """Push the top wall (its load up by one) and let the right wall back (down by one)."""
+    load = np.zeros(net.dof)
+    walls = net.wall_dof[net.wall_dof >= 0]
+    load[walls] = [-1.0, 1.0]
+    return load
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_exactly_one_contact_state_is_consistent(seed):
+    """Quasi-rigidity Sec. II D on small packings: every state is stable here (checked), so the
+    consistency map C must be a bijection of {0,1}^M_c and exactly one state obey the principle of
+    minimum sliding; the iterative solver and the dynamics find that state."""
+    from engine.analysis.stiffness import critical_contacts, enumerate_states, solve_status
+
+    net = turned_box(1, seed)
+    critical = critical_contacts(net)
+    assert 8 <= len(critical) <= 16
+    load = deviatoric_load(net)
+    found = enumerate_states(net, load, critical)
+    assert found.states_checked == 2 ** len(critical)
+    assert found.unstable_states == []  # the theorem's premise, checked
+    assert found.bijective and len(found.consistent_states) == 1
+    solution = solve_status(net, load, critical)
+    assert "".join("1" if b else "0" for b in solution.sliding[critical]) == found.consistent_states[0]
