@@ -329,7 +329,7 @@ class LabEngine:
         status.update(state="error" if self.error else ("running" if self.running else "paused"), error=self.error,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
-                      presets=list(PRESETS), command_ms=self.command_ms)
+                      presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history))
         status = jsonable(status)
         with self._lock:
             self._status = status

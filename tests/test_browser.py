@@ -137,7 +137,7 @@ def test_preset_switch_builds_its_plots(page, lab):
 
 def test_save_then_load_round_trips(page, lab):
     open_dashboard(page, lab, "ratchet16")
-    page.wait_for_timeout(2500)
+    wait_status(lab, lambda s: s["preset"] == "ratchet16" and s["history_frames"] >= 2)  # a replay of 3+ frames
     page.fill(".save-name input", "roundtrip.h5")
     page.keyboard.press("Enter")
     page.click(".save-button button")
