@@ -196,3 +196,24 @@ def test_exactly_one_contact_state_is_consistent(seed):
     assert found.bijective and len(found.consistent_states) == 1
     solution = solve_status(net, load, critical)
     assert "".join("1" if b else "0" for b in solution.sliding[critical]) == found.consistent_states[0]
+
+
+def test_mechanisms_of_a_free_triangle_are_its_rigid_motions_and_a_net_force_collapses_it():
+    """Quasi-rigidity Sec. III E: a frictional triangle in free space has exactly the three rigid
+    motions as null modes of k; a self-balanced load (two disks pulled apart along their line)
+    leaves them unexcited, a net force excites one (no quasi-static solution: collapse). A fourth,
+    distant disk adds three rattler modes."""
+    from engine.analysis.stiffness import mechanisms
+
+    d = 2.0 - 1e-6
+    triangle = [(0.0, 0.0), (d, 0.0), (d / 2, d * math.sqrt(3) / 2)]
+    net = glued(triangle + [(20.0, 0.0)], [1.0] * 4, ContactLaw(friction=0.5))
+    balanced = np.zeros(net.dof)
+    balanced[0], balanced[3] = -1.0, 1.0
+    m = mechanisms(net, balanced)
+    assert (m.count, m.rigid_body, m.rattlers, m.unexcited, m.collapse, m.unstable) == (6, 3, 3, 0, False, 0)
+    pushed = np.zeros(net.dof)
+    pushed[1] = 1.0  # disk 0 pushed along y: a net force on the triangle
+    m = mechanisms(net, pushed)
+    assert m.collapse and (m.rigid_body, m.unexcited) == (3, 0)
+    assert np.abs(m.collapse_mode[3 * 3:]).max() == 0.0  # the rattler takes no part

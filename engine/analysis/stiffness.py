@@ -372,15 +372,18 @@ def _rigid_motions(net: Network) -> np.ndarray:
     return out
 
 
-def _shared_dimension(basis: np.ndarray, vectors: np.ndarray, tolerance: float = 1e-6) -> int:
-    """Dimension of the intersection of span(basis) (orthonormal columns) with span(vectors)."""
+def _split(basis: np.ndarray, vectors: np.ndarray, tolerance: float = 1e-6) -> tuple[int, np.ndarray]:
+    """Dimension of the intersection of span(basis) (orthonormal columns) with span(vectors), and an
+    orthonormal basis of the rest of span(basis) (its part orthogonal to that intersection)."""
     if basis.shape[1] == 0 or vectors.shape[1] == 0:
-        return 0
+        return 0, basis
     q, r = np.linalg.qr(vectors)
     q = q[:, np.abs(np.diag(r)) > tolerance * max(1.0, np.abs(r).max())]
     if q.shape[1] == 0:
-        return 0
-    return int(np.count_nonzero(np.linalg.svd(q.T @ basis, compute_uv=False) > 1.0 - tolerance))
+        return 0, basis
+    _, sigma, vt = np.linalg.svd(q.T @ basis)
+    shared = int(np.count_nonzero(sigma > 1.0 - tolerance))
+    return shared, basis @ vt[shared:].T
 
 
 @dataclass(frozen=True)
@@ -388,18 +391,18 @@ class Mechanisms:
     """Null modes of k (quasi-rigidity Sec. III E) and what they are.
 
     ``count`` zero modes, of which ``rigid_body`` are motions of the whole, ``rattlers`` those of
-    disks without interactions (three each), ``unexcited`` those the load increment does not
-    excite (f_ext · v* = 0); ``collapse`` is true when the load has a component along the rest:
+    disks without interactions (three each), ``unexcited`` those of the others the load
+    increment does not excite (f_ext · v* = 0); ``collapse`` is true when the load has a component along the rest:
     then Eq. 39 has no solution and the packing collapses (``collapse_mode``, the excited motion).
     ``unstable`` counts directions with Q = vᵀkv < 0 (motion through an instability). ``modes``
     (n_dof, count - 3 x rattler disks) is a basis of the modes outside the rattlers (None if too
-    many)."""
+    many; then the classification is None)."""
 
     count: int
-    rigid_body: int
+    rigid_body: int | None
     rattlers: int
-    unexcited: int
-    collapse: bool
+    unexcited: int | None
+    collapse: bool | None
     unstable: int
     modes: np.ndarray | None
     collapse_mode: np.ndarray | None
@@ -427,10 +430,7 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
     unstable = count_below(reduced, -tolerance * scale) if scale > 0 else 0
     zero, basis = null_space(reduced, tolerance, vectors=True, max_vectors=max_vectors)
     zero -= unstable
-    modes = None
-    rigid = unexcited = 0
-    collapse = False
-    collapse_mode = None
+    modes = collapse_mode = rigid = unexcited = collapse = None  # unknown without the modes
     if basis is not None:
         modes = np.zeros((net.dof, basis.shape[1]))
         modes[index] = basis
@@ -438,11 +438,11 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
             modes = modes[:, unstable:]
         rigid_vectors = _rigid_motions(net)
         rigid_vectors[~keep] = 0.0
-        rigid = _shared_dimension(modes, rigid_vectors)
+        rigid, others = _split(modes, rigid_vectors)
         along = modes.T @ load
         size = np.linalg.norm(load)
         collapse = bool(size > 0 and np.linalg.norm(along) > 1e-8 * size)
-        unexcited = zero - rigid - int(collapse)
+        unexcited = others.shape[1] - int(size > 0 and np.linalg.norm(others.T @ load) > 1e-8 * size)
         if collapse:
             collapse_mode = modes @ (along / np.linalg.norm(along))
     return Mechanisms(zero + 3 * len(loose), rigid, 3 * len(loose), unexcited, collapse, unstable, modes,
