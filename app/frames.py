@@ -86,6 +86,16 @@ def _rows_of(pair: np.ndarray, wanted) -> np.ndarray:
     return np.flatnonzero(np.isin(codes, wanted[:, 0] * base + wanted[:, 1]))
 
 
+def _f64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _i64(a) -> np.ndarray:
+    """Integers as int64: live tables (int32, int8) and run files give one compiled signature of
+    :func:`contact_fields` (a new one would compile for seconds on the scene thread)."""
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
 def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                 watched: list[list[tuple[int, int]]] | None = None) -> SceneFrame:
     """A scene frame of one or more states drawn side by side (each shifted by its offset).
@@ -108,9 +118,9 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
     for (data, offset), pairs in zip(parts, watched):
         shift = np.asarray(offset, dtype=float)
         n, m = data.positions.shape[0], data.pair.shape[0]
-        contact_fields(data.positions, data.radii, data.pair, data.image, data.status, data.normal_force,
-                       data.tangential_force, data.surface_gap, data.wall_normal,
-                       np.asarray(data.cell, dtype=float), shift, coordination[n0:n0 + n], pressure[n0:n0 + n],
+        contact_fields(_f64(data.positions), _f64(data.radii), _i64(data.pair), _i64(data.image), _i64(data.status),
+                       _f64(data.normal_force), _f64(data.tangential_force), _f64(data.surface_gap),
+                       _f64(data.wall_normal).reshape(-1, 2), _f64(data.cell), shift, coordination[n0:n0 + n], pressure[n0:n0 + n],
                        sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m], kind[m0:m0 + m])
         positions.append(data.positions + shift)
         walls.append(_wall_segments(data) + shift)
