@@ -314,7 +314,8 @@ class LabEngine:
         :class:`FrameData`; the scene's thread builds the frame from them)."""
         source = self.source
         if isinstance(source, Replay):
-            parts = ([(source.data(), (0.0, 0.0))], None)
+            if frame:
+                parts = ([(source.data(), (0.0, 0.0))], None)
             status = source.status()
         else:
             views = source.views()

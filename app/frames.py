@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from engine.kernels.jit import KERNEL
+from engine.protocols.presets import pair_codes
 from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 from .scene import SceneFrame
@@ -81,9 +82,7 @@ def _rows_of(pair: np.ndarray, wanted) -> np.ndarray:
     if not len(wanted) or not len(pair):
         return np.zeros(0, dtype=np.int64)
     wanted = np.asarray(wanted, dtype=np.int64).reshape(-1, 2)
-    base = int(max(pair.max(), wanted.max())) + 1
-    codes = pair[:, 0].astype(np.int64) * base + pair[:, 1]
-    return np.flatnonzero(np.isin(codes, wanted[:, 0] * base + wanted[:, 1]))
+    return np.flatnonzero(np.isin(pair_codes(pair[:, 0], pair[:, 1]), pair_codes(wanted[:, 0], wanted[:, 1])))
 
 
 def _f64(a) -> np.ndarray:

@@ -141,7 +141,7 @@ def network(snapshot, cell_lengths=None) -> Network:
                   _tangent_normal_stiffness(law, np.maximum(-gap, 0.0), ri, rj, is_wall))
     kt = np.where(distant, 0.0, law.tangential_stiffness)
     kr = np.where(distant, 0.0, law.rolling_stiffness)
-    modes = getattr(snapshot, "wall_modes", ()) or ("fixed",) * len(snapshot.wall_normals)
+    modes = snapshot.wall_modes or ("fixed",) * len(snapshot.wall_normals)
     mobile = np.array([m == "force" for m in modes], dtype=bool)
     wall_dof = np.full(len(modes), -1)
     wall_dof[mobile] = 3 * n + np.arange(int(mobile.sum()))
@@ -463,9 +463,13 @@ def critical_contacts(net: Network, tolerance: float = 1e-6) -> np.ndarray:
 def v_tilde(net: Network, v: np.ndarray) -> np.ndarray:
     """Ṽ = mu (K_n/K_t) V_n + V_t sgn D_t per contact (quasi-rigidity Eq. 10): dF̃/dt = -K_t Ṽ for
     a non-sliding contact (Eq. 11), so Ṽ > 0 would carry it out of the cone."""
-    rel = relative_velocities(net, v)
-    kt = np.where(net.kt > 0.0, net.kt, np.inf)
-    return net.friction * net.kn / kt * rel[:, 0] + rel[:, 1] * net.sign_dt
+    return _v_tilde(net, relative_velocities(net, v), slice(None))
+
+
+def _v_tilde(net: Network, rel: np.ndarray, rows) -> np.ndarray:
+    """Eq. 10 for the contacts ``rows`` from their relative velocities ``rel`` (normal, tangential)."""
+    kt = np.where(net.kt[rows] > 0.0, net.kt[rows], np.inf)
+    return net.friction * net.kn[rows] / kt * rel[:, 0] + rel[:, 1] * net.sign_dt[rows]
 
 
 def _sliding_set(net: Network, critical: np.ndarray, bits) -> np.ndarray:
@@ -475,14 +479,15 @@ def _sliding_set(net: Network, critical: np.ndarray, bits) -> np.ndarray:
     return sliding
 
 
-def consistency(net: Network, load_increment: np.ndarray, critical: np.ndarray, bits) -> tuple[np.ndarray, np.ndarray]:
-    """For the state ``bits`` (1 = sliding) of the critical contacts: the quasi-static velocities and
-    the consistency of each critical contact with the principle of minimum sliding (sliding needs
-    Ṽ > 0, non-sliding Ṽ <= 0)."""
+def consistency(net: Network, load_increment: np.ndarray, critical: np.ndarray,
+                bits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For the state ``bits`` (1 = sliding) of the critical contacts: the quasi-static velocities,
+    Ṽ of the critical contacts and the consistency of each with the principle of minimum sliding
+    (sliding needs Ṽ > 0, non-sliding Ṽ <= 0)."""
     bits = np.asarray(bits, dtype=bool)
     v = response(net, load_increment, _sliding_set(net, critical, bits))
     vt = v_tilde(net, v)[critical]
-    return v, np.where(bits, vt > 0.0, vt <= 0.0)
+    return v, vt, np.where(bits, vt > 0.0, vt <= 0.0)
 
 
 @dataclass(frozen=True)
@@ -508,11 +513,10 @@ def solve_status(net: Network, load_increment: np.ndarray, critical: np.ndarray 
     bits = start.copy()
     limit = max_iterations if max_iterations is not None else 20 * max(1, len(critical))
     for iteration in range(limit + 1):
-        v, ok = consistency(net, load_increment, critical, bits)
+        v, vt, ok = consistency(net, load_increment, critical, bits)
         if ok.all():
             return StatusSolution(_sliding_set(net, critical, bits), critical, iteration, v,
                                   bool(np.array_equal(bits, start)))
-        vt = v_tilde(net, v)[critical]
         worst = int(np.argmax(np.where(ok, -np.inf, np.abs(vt))))
         bits[worst] = not bits[worst]
     raise ParameterError("contact status", f"no consistent state after {limit} flips",
@@ -557,9 +561,7 @@ def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndar
     if net.dof > DENSE_SIZE:
         raise ParameterError("velocity components", net.dof, f"at most {DENSE_SIZE} to enumerate states densely")
     load = np.asarray(load_increment, dtype=float)
-    stuck = np.zeros(net.contacts, dtype=bool)
-    stuck[:] = net.sliding
-    stuck[critical] = False
+    stuck = _sliding_set(net, critical, np.zeros(mc, dtype=bool))
     base = stiffness_matrix(net, stuck).toarray()
     changes = []
     for a in critical:
@@ -573,14 +575,12 @@ def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndar
         keep[3 * loose + offset] = False
     delta = 1e-10 * float(np.abs(np.diag(base)).max() or 1.0)
     scale = float(np.abs(np.diag(base)[keep]).max()) if keep.any() else 0.0
-    kt = np.where(net.kt[critical] > 0.0, net.kt[critical], np.inf)
     images, consistent, unstable = set(), [], []
     for code in range(2 ** mc):
         bits = np.array([(code >> b) & 1 for b in range(mc)], dtype=bool)
         k = base + sum((changes[b] for b in np.flatnonzero(bits)), np.zeros_like(base))
         v = np.linalg.solve(k + delta * np.eye(net.dof), load)
-        rel = (c.T @ v).reshape(-1, 3)[critical]
-        vt = net.friction * net.kn[critical] / kt * rel[:, 0] + rel[:, 1] * net.sign_dt[critical]
+        vt = _v_tilde(net, (c.T @ v).reshape(-1, 3)[critical], critical)
         ok = np.where(bits, vt > 0.0, vt <= 0.0)
         images.add(tuple(ok))
         label = "".join("1" if b else "0" for b in bits)
