@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import GranLabError
-from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall
+from ..params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
 from ..state import STATUS_NAMES, ParticleState
 
@@ -46,13 +46,21 @@ PARTICLE_ELEMENTS = (("position", (2,)), ("velocity", (2,)), ("angle", ()), ("om
                      ("mass", ()))
 
 
+FRAME_OBSERVABLES = (("wall_position", "observables/walls/position"), ("wall_force", "observables/walls/force"),
+                     ("wall_mode", "observables/walls/mode"), ("stress", "observables/stress"),
+                     ("law_json", "observables/law"))
+"""Per-frame observables that :func:`read_frame` returns with the particles (key, path)."""
+
+
 class RunFileError(GranLabError, OSError):
     """A run file that is missing, not HDF5, not H5MD, or lacks what was asked of it."""
 
 
 def _extendable(group, name, shape, dtype, chunk_rows=64):
-    return group.create_dataset(name, shape=(0,) + tuple(shape), maxshape=(None,) + tuple(shape), dtype=dtype,
-                                chunks=(chunk_rows,) + tuple(shape))
+    """An empty dataset that grows along its first axis (an axis of length 0, e.g. no walls, is
+    chunked as if it had length 1)."""
+    return group.create_dataset(name, shape=(0,) + tuple(shape), maxshape=(None,) + tuple(d or None for d in shape),
+                                dtype=dtype, chunks=(chunk_rows,) + tuple(max(1, d) for d in shape))
 
 
 def _append(dataset, value) -> None:
@@ -147,7 +155,9 @@ class RunWriter:
         walls.attrs["names"] = np.array(sim.walls.names, dtype="S32")
         _time_dependent(walls, "position", (nw,))
         _time_dependent(walls, "force", (nw,))
+        _time_dependent(walls, "mode", (nw,), np.int8)
         _time_dependent(observables, "stress", (2, 2))
+        _time_dependent(observables, "law", (), h5py.string_dtype())
         cycles = observables.create_group("cycles")
         for name in CYCLE_FIELDS:
             _extendable(cycles, name, (), np.int64 if name in ("cycle", "step") else np.float64)
@@ -240,7 +250,9 @@ class RunWriter:
         self._element("observables/energy", step, time, [budget[k] for k in ENERGY_FIELDS])
         self._element("observables/walls/position", step, time, snap.wall_offsets)
         self._element("observables/walls/force", step, time, snap.wall_forces)
+        self._element("observables/walls/mode", step, time, [WALL_MODES.index(m) for m in snap.wall_modes])
         self._element("observables/stress", step, time, snap.stress)
+        self._element("observables/law", step, time, to_json(snap.law))
         self.file.flush()
 
     def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:
@@ -351,7 +363,8 @@ def frame_count(f: h5py.File) -> int:
 
 
 def read_frame(f: h5py.File, index: int) -> dict:
-    """Positions, velocities, radii, ... of frame ``index`` (negative counts from the end)."""
+    """Positions, velocities, radii, ..., the contact table and the observables of
+    :data:`FRAME_OBSERVABLES` of frame ``index`` (negative counts from the end)."""
     count = frame_count(f)
     if count == 0:
         raise RunFileError(f"{f.filename!r} holds no complete frame")
@@ -371,6 +384,10 @@ def read_frame(f: h5py.File, index: int) -> dict:
     if "contacts/offset" in f:
         lo, hi = f["contacts/offset"][index:index + 2]
         frame["contacts"] = {name: f["contacts"][name][lo:hi] for name, _, _ in CONTACT_FIELDS}
+    for key, path in FRAME_OBSERVABLES:
+        if f"{path}/value" in f and f[f"{path}/value"].shape[0] > index:
+            value = f[f"{path}/value"][index]
+            frame[key] = value.decode() if isinstance(value, bytes) else value
     return frame
 
 
