@@ -36,6 +36,8 @@ TARGETS = {"engine_fraction": 0.5, "scene_fps": 20.0, "latency_ms": 200.0}
 
 
 def handler(args) -> dict:
+    if args.particles is None:
+        args.particles = 5600
     if args.particles < 1 or args.seconds <= 0 or args.tabs < 0:
         raise GranLabError(f"bench --lab takes --particles >= 1, --seconds > 0 and --tabs >= 0, not "
                            f"{args.particles}, {args.seconds} and {args.tabs}")

@@ -22,7 +22,6 @@ def build_parser():
     bench = commands.choices["bench"]
     bench.add_argument("--lab", action="store_true",
                        help="benchmark the lab instead: a served preset streaming to a headless Chromium tab")
-    bench.add_argument("--particles", type=int, default=5600, help="disks in the lab benchmark (default 5600)")
     bench.add_argument("--seconds", type=float, default=20.0, help="length of each lab measurement (default 20 s)")
     bench.add_argument("--tabs", type=int, default=100, help="tabs opened and closed by the lab benchmark (default 100)")
     return parser

@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from .errors import GranLabError
 from .params import ContactLaw, Integration, PeriodicCell
 from .simulation import Simulation
 from .state import ParticleState
@@ -78,3 +80,53 @@ def run(steps: int = TIMED_STEPS, side: int = 100) -> dict:
         "particles": one["particles"],
         "steps": steps,
     }
+
+
+ANALYSIS_PARTICLES = 5600
+
+
+def prepared_packing(path: str | Path, particles: int = ANALYSIS_PARTICLES, seed: int = 1) -> float | None:
+    """Make sure ``path`` holds a packing to analyse: if it does not exist, prepare one by
+    Gilabert's method 1 (cohesionless, mu = 0.5, P/K_N = 1e-5, Phi_I = 0.36) and write it there.
+    Returns the preparation's wall time (None if the file was there)."""
+    from .io.h5md import RunWriter
+    from .protocols.prepare import gilabert_law, method1
+
+    path = Path(path)
+    if path.exists():
+        return None
+    law = gilabert_law(friction=0.5, cohesion=False, pressure=1e-2)
+    prepared = method1(count=particles, pressure=1e-2, law=law, seed=seed, max_time=20000.0)
+    with RunWriter(path, prepared.sim, protocol={"command": "bench --analysis", "method": "1", "seed": seed,
+                                                 "equilibrated": prepared.equilibrated}) as writer:
+        writer.write_frame(prepared.sim)
+        writer.write_checkpoint(prepared.sim)
+    return prepared.wall_time_s
+
+
+def analysis(path: str | Path, particles: int = ANALYSIS_PARTICLES, repeats: int = 2) -> dict:
+    """Wall time of every analysis of ``granlab analyze`` on the packing in ``path`` (prepared
+    there first if missing), each run ``repeats`` times (the first compiles or loads kernels);
+    the figures are the fastest run."""
+    from .analysis.report import ANALYSES, analyze
+    from .analysis.states import read_state
+
+    preparation = prepared_packing(path, particles)
+    state = read_state(path)
+    timings, values = {}, {}
+    for kind in ANALYSES:
+        try:
+            runs = [analyze(state, kind) for _ in range(repeats)]
+        except GranLabError as error:  # e.g. a box too small for the fractal fit: report it, go on
+            values[kind] = {"error": str(error)}
+            continue
+        best = min(runs, key=lambda report: report.timings["total"])
+        timings[kind] = best.timings
+        values[kind] = {k: v for k, v in best.values.items() if not isinstance(v, (list, tuple, dict))}
+
+    def total(*kinds):
+        return sum(timings[k]["total"] for k in kinds) if all(k in timings for k in kinds) else None
+
+    return {"packing": str(path), "particles": state.disks, "contacts": int(state.contacts.count),
+            "preparation_s": preparation, "timings_s": timings, "values": values,
+            "stiffness_mechanisms_status_s": total("stiffness", "status"), "fractal_s": total("fractal")}

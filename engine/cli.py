@@ -4,9 +4,12 @@
   the built-in ``default`` scene) and print a summary or one JSON object;
 - ``granlab experiment NAME [--model M] [--zeta Z] [--mu MU] [--dt DT] [--json]``: a teaching
   experiment (collision, closed-path, block) against its formula;
-- ``granlab bench [--steps S] [--json]``: particle-steps per second on the LAMMPS reference system;
+- ``granlab bench [--steps S] [--json]``: particle-steps per second on the LAMMPS reference system
+  (``--analysis PACKING.h5``: the wall time of every analysis instead);
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
+- ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
+  quasi-static and structural analysis of one frame (:mod:`engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
 
 Errors print one line naming what is wrong and exit with status 2.
@@ -23,6 +26,7 @@ from pathlib import Path
 
 import numba
 
+from .analysis.report import ANALYSES, LOADS
 from .errors import GranLabError
 from .io.jsonsafe import jsonable
 
@@ -147,12 +151,25 @@ def _print_experiment(result: dict) -> None:
 def _bench(args) -> dict:
     from . import bench
 
+    if args.analysis:
+        return bench.analysis(args.analysis, args.particles or bench.ANALYSIS_PARTICLES)
     if args.steps < 1 or not 2 <= args.side <= 1000:
         raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {args.steps} and {args.side}")
     return bench.run(args.steps, args.side)
 
 
 def _print_bench(result: dict) -> None:
+    if "fractal_s" in result:
+        print(f"analysis of {result['packing']}: {result['particles']} disks, {result['contacts']} contacts"
+              + (f" (prepared in {result['preparation_s']:.0f} s)" if result["preparation_s"] else ""))
+        for kind, values in result["values"].items():
+            if "error" in values:
+                print(f"  {kind}: error: {values['error']}")
+                continue
+            timing = result["timings_s"][kind]
+            stages = ", ".join(f"{k} {v:.3f}" for k, v in timing.items() if k != "total")
+            print(f"  {kind}: {timing['total']:.3f} s ({stages})")
+        return
     print(result["system"])
     print(f"  1 thread:  {result['particle_steps_per_s_1thread'] / 1e6:.2f} M particle-steps/s")
     print(f"  {result['threads_all']} threads: {result['particle_steps_per_s_all'] / 1e6:.2f} M particle-steps/s "
@@ -257,6 +274,33 @@ def _print_info(result: dict) -> None:
         print(f"  protocol: {json.dumps(jsonable(result['protocol']))}")
 
 
+def _analyze(args) -> dict:
+    from .analysis.report import analyze
+    from .analysis.states import read_state
+
+    state = read_state(args.runfile, args.frame, friction=args.mu)
+    result = analyze(state, args.analysis, load=args.load, seed=args.seed).as_dict()
+    result.update(run_file=args.runfile, source=state.source, particles=state.disks, forces_known=state.forces_known)
+    return result
+
+
+def _print_analysis(result: dict) -> None:
+    print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
+          + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
+    for key, value in result.items():
+        if key in ("analysis", "source", "particles", "forces_known", "run_file", "timings_s"):
+            continue
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        elif key.endswith("_histogram") and value is not None:
+            value = f"{len(value[1])} bins from {value[0][0]:.4g} to {value[0][-1]:.4g}"
+        elif isinstance(value, list):
+            value = ", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in value[:12]) + \
+                (f", ... ({len(value)} values)" if len(value) > 12 else "")
+        print(f"  {key}: {value}")
+    print("  time: " + ", ".join(f"{k} {v:.3g} s" for k, v in result["timings_s"].items()))
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -293,6 +337,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench = commands.add_parser("bench", help="particle-steps per second on the LAMMPS reference system")
     bench.add_argument("--steps", type=int, default=5000, help="timed steps (default 5000)")
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
+    bench.add_argument("--analysis", metavar="PACKING.h5",
+                       help="time every analysis of 'granlab analyze' on this packing instead (prepared there by "
+                            "method 1 if missing)")
+    bench.add_argument("--particles", type=_positive_int, help="disks of a prepared packing or of the lab (default 5600)")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench, printer=_print_bench)
 
@@ -336,6 +384,17 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")
     ratchet.set_defaults(handler=_study, printer=_print_study)
+
+    analyze = commands.add_parser("analyze", help="quasi-static and structural analysis of one frame of a run file")
+    analyze.add_argument("runfile", help="a GranLab run file or any H5MD file with positions, radii and a 2D box")
+    analyze.add_argument("analysis", choices=ANALYSES)
+    analyze.add_argument("--frame", type=int, default=-1, help="frame index (negative counts from the end; default -1)")
+    analyze.add_argument("--load", choices=LOADS, default="auto",
+                         help="load increment of stiffness and status (default auto: the walls' loads, else random)")
+    analyze.add_argument("--seed", type=int, default=0, help="seed of the random load increment")
+    analyze.add_argument("--mu", type=_float, help="friction coefficient to assume (default: the run's)")
+    analyze.add_argument("--json", action="store_true", help="print one JSON object")
+    analyze.set_defaults(handler=_analyze, printer=_print_analysis)
 
     info = commands.add_parser("info", help="summarise a run file")
     info.add_argument("runfile")

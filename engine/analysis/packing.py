@@ -1,23 +1,44 @@
-"""Packing statistics of a snapshot (Gilabert Secs. III-IV): solid fraction, coordination, rattlers."""
+"""Packing statistics of a state (Gilabert Secs. III-IV): solid fraction, coordination, rattlers,
+local coordinations, force distributions, the Rumpf relation and the force-percolation threshold.
+
+A state is a :class:`engine.simulation.Snapshot` or an :class:`engine.analysis.states.PackingState`.
+Forces follow the engine's conventions: ``N`` (total normal force, > 0 repulsive) along ``n``
+from j to i, ``T`` along ``t = z × n``.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..simulation import Snapshot
 from ..state import STATUS_NONE
 
 RATTLER_FORCE_TOLERANCE = 1e-4
+"""Interactions carrying less than this fraction of F1 = max(F0, P a) count as carrying no force
+(Gilabert Sec. III A)."""
+FORCE_BINS = 40
+THETA_BINS = 36
 
 
 @dataclass(frozen=True)
 class PackingStats:
     """``phi``: solid fraction; ``z``: mean number of force-carrying disk-disk interactions per disk
-    (rattlers included, as ``2 M / N``); ``z_star``: the same on the backbone, ``z / (1 - x0)``
+    (rattlers included, ``2 M / N``); ``z_star``: the same on the backbone, ``z / (1 - x0)``
     (Gilabert Eq. 13); ``rattlers``: disks whose interactions all carry less than the tolerance
-    ``1e-4 F1`` (Gilabert Sec. III A); ``contacts``: force-carrying disk-disk interactions."""
+    ``1e-4 F1``; ``contacts``: force-carrying disk-disk interactions; ``coordination``: x_k, the
+    fraction of disks with k force-carrying disk-disk interactions (k = 0, 1, ...).
+
+    With forces known (``forces_known``): ``force_unit`` (F0 with cohesion, else the mean normal
+    force), ``normal_force_histogram`` (edges, fractions) of N / force_unit, ``theta_histogram``
+    (edges in degrees, fractions) of the angle between n and F (Gilabert Fig. 15: 0 for a pure
+    repulsion, 180 for a pure attraction), ``mean_normal_force`` F_N = <N> over all disk-disk
+    interactions, ``pressure`` P of the disk-disk stress, ``rumpf_force`` F_N from Eq. 17 with the
+    sample's <d> and <d^2>, ``rumpf_force_eq18`` (7 pi a / 9) P / (z Phi) for Gilabert's
+    distribution (Eq. 18), and ``percolation_force`` F_perc: the largest threshold such that the
+    interactions with |F| >= F_perc percolate (wrap around a periodic axis or join two opposite
+    walls). ``normal``, ``tangential`` are the (N, T) of every interaction, for the scatter of
+    Gilabert Fig. 14 with its lines T = ±sqrt(3) N (Eq. 20)."""
 
     phi: float
     z: float
@@ -25,25 +46,46 @@ class PackingStats:
     rattlers: int
     contacts: int
     particles: int
+    coordination: list[float]
+    forces_known: bool = True
+    force_unit: float | None = None
+    normal_force_histogram: tuple[list[float], list[float]] | None = None
+    theta_histogram: tuple[list[float], list[float]] | None = None
+    mean_normal_force: float | None = None
+    pressure: float | None = None
+    rumpf_force: float | None = None
+    rumpf_force_eq18: float | None = None
+    percolation_force: float | None = None
+    normal: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    tangential: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     def as_dict(self) -> dict:
-        return dict(self.__dict__)
+        return {k: v for k, v in self.__dict__.items() if k not in ("normal", "tangential")}
 
 
-def solid_fraction(snapshot: Snapshot, area: float | None = None) -> float:
-    """Area of the disks over the area of the domain (``area``, or the snapshot's box)."""
+def solid_fraction(state, area: float | None = None) -> float:
+    """Area of the disks over the area of the domain (``area``, or the state's box)."""
     if area is None:
-        area = float(np.prod(snapshot.box_lengths))
-    return float(np.pi * np.sum(snapshot.radii ** 2) / area)
+        area = float(np.prod(state.box_lengths))
+    return float(np.pi * np.sum(state.radii ** 2) / area)
 
 
-def packing_stats(snapshot: Snapshot, force_scale: float, area: float | None = None) -> PackingStats:
-    """Statistics of ``snapshot``; interactions carrying less than ``1e-4 force_scale`` (Gilabert's F1)
-    are ignored, and a disk with none left is a rattler."""
-    n = snapshot.positions.shape[0]
-    c = snapshot.contacts
+def force_scale(state) -> float:
+    """Gilabert's F1 = max(F0, P a): F0 the cohesion force, P the pressure, a the largest diameter."""
+    pressure = 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
+    return max(float(state.law.cohesion_force), pressure * 2.0 * float(state.radii.max()))
+
+
+def packing_stats(state, force_scale_value: float | None = None, area: float | None = None) -> PackingStats:
+    """Statistics of ``state``; interactions carrying less than ``1e-4 F1`` (default F1:
+    :func:`force_scale`) are ignored, and a disk with none left is a rattler. A state without
+    forces (a generic H5MD file) counts every touching pair and leaves the force statistics out."""
+    n = state.positions.shape[0]
+    c = state.contacts
+    forces_known = getattr(state, "forces_known", True)
+    scale = force_scale(state) if force_scale_value is None else force_scale_value
     force = np.hypot(c.normal_force, c.tangential_force)
-    carrying = (c.status != STATUS_NONE) & (force > RATTLER_FORCE_TOLERANCE * force_scale)
+    carrying = (c.status != STATUS_NONE) & ((force > RATTLER_FORCE_TOLERANCE * scale) | (not forces_known))
     pair = carrying & (c.j < n)
     per_disk = np.bincount(c.i[pair], minlength=n) + np.bincount(c.j[pair], minlength=n)
     with_walls = per_disk + np.bincount(c.i[carrying & (c.j >= n)], minlength=n)
@@ -51,5 +93,87 @@ def packing_stats(snapshot: Snapshot, force_scale: float, area: float | None = N
     contacts = int(np.count_nonzero(pair))
     z = 2.0 * contacts / n
     backbone = n - rattlers
-    return PackingStats(phi=solid_fraction(snapshot, area), z=z, z_star=2.0 * contacts / backbone if backbone else 0.0,
-                        rattlers=rattlers, contacts=contacts, particles=n)
+    phi = solid_fraction(state, area)
+    stats = dict(phi=phi, z=z, z_star=2.0 * contacts / backbone if backbone else 0.0, rattlers=rattlers,
+                 contacts=contacts, particles=n, coordination=(np.bincount(per_disk) / n).tolist(),
+                 forces_known=forces_known)
+    if forces_known:
+        stats.update(_force_statistics(state, phi, scale))
+    return PackingStats(**stats)
+
+
+def _histogram(values: np.ndarray, bins, value_range) -> tuple[list[float], list[float]]:
+    counts, edges = np.histogram(values, bins=bins, range=value_range)
+    return edges.tolist(), (counts / max(1, len(values))).tolist()
+
+
+def _force_statistics(state, phi: float, scale: float) -> dict:
+    n = state.positions.shape[0]
+    c = state.contacts
+    interacting = (c.status != STATUS_NONE) & (c.j < n)
+    normal, tangential = c.normal_force[interacting], c.tangential_force[interacting]
+    count = len(normal)
+    mean = float(normal.mean()) if count else 0.0
+    cohesive = float(state.law.cohesion_force) > 0.0
+    unit = float(state.law.cohesion_force) if cohesive else mean
+    scaled = normal / unit if unit > 0 else normal
+    low, high = (float(scaled.min()), float(scaled.max())) if count else (0.0, 1.0)
+    theta = np.degrees(np.arctan2(np.abs(tangential), normal))
+    pressure = 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
+    z = 2.0 * count / n
+    diameters = 2.0 * np.asarray(state.radii)
+    denominator = z * phi
+    return dict(
+        force_unit=unit, normal_force_histogram=_histogram(scaled, FORCE_BINS, (low, max(high, low + 1e-12))),
+        theta_histogram=_histogram(theta, THETA_BINS, (0.0, 180.0)), mean_normal_force=mean, pressure=pressure,
+        rumpf_force=float(np.pi * np.mean(diameters ** 2) / np.mean(diameters) * pressure / denominator)
+        if denominator > 0 else None,
+        rumpf_force_eq18=float(7.0 * np.pi * diameters.max() / 9.0 * pressure / denominator) if denominator > 0 else None,
+        percolation_force=percolation_force(state, np.hypot(c.normal_force, c.tangential_force),
+                                            c.status != STATUS_NONE),
+        normal=normal, tangential=tangential)
+
+
+def percolation_force(state, force: np.ndarray, usable: np.ndarray) -> float | None:
+    """F_perc (Gilabert Sec. IV B 1): add the interactions from the largest |F| down, joining
+    disks (and walls) in clusters (union by size) that remember the periodic image of each member
+    relative to its root; the force of the interaction that first closes a loop wrapping around a
+    periodic axis, or first joins two walls facing each other, is F_perc. ``None`` if they never
+    percolate."""
+    n = state.positions.shape[0]
+    c = state.contacts
+    normals = np.asarray(state.wall_normals)
+    parent = list(range(n + len(normals)))
+    size = [1] * len(parent)
+    shift = [(0, 0)] * len(parent)
+    walls = {n + w: [w] for w in range(len(normals))}
+
+    def root(a):
+        sx = sy = 0
+        while parent[a] != a:
+            sx, sy = sx + shift[a][0], sy + shift[a][1]
+            a = parent[a]
+        return a, sx, sy
+
+    for row in np.argsort(-force, kind="stable"):
+        if not usable[row]:
+            continue
+        i, j = int(c.i[row]), int(c.j[row])
+        kx, ky = (int(c.image[row][0]), int(c.image[row][1])) if j < n else (0, 0)
+        ri, ix, iy = root(i)
+        rj, jx, jy = root(j)
+        if ri == rj:
+            if (ix - jx + kx, iy - jy + ky) != (0, 0):
+                return float(force[row])
+            continue
+        if size[ri] > size[rj]:  # attach j's cluster to i's: s_i - s_j + image = 0 must hold
+            ri, rj, ix, iy, jx, jy, kx, ky = rj, ri, jx, jy, ix, iy, -kx, -ky
+        parent[ri] = rj
+        size[rj] += size[ri]
+        shift[ri] = (jx - ix - kx, jy - iy - ky)
+        joined = walls.pop(ri, []) + walls.get(rj, [])
+        if joined:
+            walls[rj] = joined
+            if float((normals[joined] @ normals[joined].T).min()) < -0.99:
+                return float(force[row])
+    return None
