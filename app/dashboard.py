@@ -15,10 +15,12 @@ import panel as pn
 from bokeh.models import ColumnDataSource, Span
 from bokeh.plotting import figure
 
+from engine.analysis.report import ANALYSES
 from engine.errors import ParameterError
 from engine.params import TANGENTIAL_MODELS
 from engine.protocols.presets import PRESETS, LabSettings
 
+from . import analysis
 from .buffers import Cursor
 from .scene import COLOR_FIELDS
 
@@ -55,8 +57,13 @@ class Dashboard:
         self._all_sources: dict[str, ColumnDataSource] = {}
         self._panes: dict[str, pn.pane.Bokeh] = {}
         self._syncing = False
+        self._analysis_seen = 0
         status = engine.status()
         self._build_widgets(status)
+        self.analysis_view = self._build_analysis()
+        self.tab_choice = pn.widgets.RadioButtonGroup(options=["Plots", "Analysis"], value="Plots",
+                                                      css_classes=["tab-choice"])
+        self.tab_choice.param.watch(self._show_tab, "value")
         self.plots = pn.Column(sizing_mode="stretch_width")
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
         self.status_line = pn.pane.Markdown("", css_classes=["status-line"])
@@ -295,6 +302,64 @@ class Dashboard:
             fig.line("t", key, source=self.sources["replay"], color=color, legend_label=key)
         return fig
 
+    # ------------------------------------------------------------------ the Analysis tab
+    def _build_analysis(self):
+        self.analysis_kind = pn.widgets.Select(name="Analysis", options=list(ANALYSES), value="status",
+                                               css_classes=["analysis-select"])
+        self.analysis_button = pn.widgets.Button(name="Analyse the current state", button_type="primary",
+                                                 css_classes=["analysis-button"])
+        self.analysis_button.on_click(lambda e: self._command("analyze", kind=self.analysis_kind.value))
+        self.analysis_text = pn.pane.Markdown(
+            "Pick an analysis and press the button: it runs on the state of that moment, on its own thread. "
+            "*status* draws the force network coloured by the consistent status (blue non-sliding, red sliding; "
+            "critical contacts marked, red where the dynamics disagrees); *stiffness* draws the mechanism as "
+            "green arrows in the 3D scene; *packing* the (N, T) scatter with the lines T = ±√3 N; *fractal* "
+            "I(k) with its fit.", css_classes=["analysis-summary"], sizing_mode="stretch_width")
+        self.analysis_sources = {name: ColumnDataSource(columns, name=f"analysis-{name}") for name, columns in (
+            ("segments", {"x0": [], "y0": [], "x1": [], "y1": [], "color": []}),
+            ("critical", {"x": [], "y": [], "color": []}), ("forces", {"normal": [], "tangential": []}),
+            ("lines", {"xs": [], "ys": []}), ("data", {"k": [], "intensity": []}), ("fit", {"k": [], "fitted": []}))}
+        src = self.analysis_sources
+        network = _figure("analysis-network", "Force network by consistent status", "x", "y", match_aspect=True)
+        network.segment("x0", "y0", "x1", "y1", color="color", source=src["segments"], line_width=1.5)
+        network.scatter("x", "y", color="color", source=src["critical"], size=7, marker="diamond")
+        forces = _figure("analysis-forces", "Contact forces (N, T), lines T = ±√3 N", "N", "T")
+        forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5)
+        forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed")
+        structure = _figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k", "I(k)",
+                            x_axis_type="log", y_axis_type="log")
+        structure.scatter("k", "intensity", source=src["data"], size=4)
+        structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2)
+        return pn.Column(pn.Row(self.analysis_kind, self.analysis_button), self.analysis_text,
+                         *(pn.pane.Bokeh(fig, sizing_mode="stretch_width") for fig in (network, forces, structure)),
+                         sizing_mode="stretch_width", visible=False)
+
+    def _show_tab(self, event) -> None:
+        """The two tabs below the scene (pn.Tabs would fetch its stylesheets from a CDN)."""
+        self.plots.visible = event.new == "Plots"
+        self.analysis_view.visible = event.new == "Analysis"
+
+    def _update_analysis(self) -> None:
+        result = self.engine.analysis.latest()
+        if result.seq == self._analysis_seen:
+            return
+        self._analysis_seen = result.seq
+        self.analysis_text.object = analysis.summary(result)
+        if result.report is None:
+            return
+        kind, src = result.kind, self.analysis_sources
+        if kind == "status":
+            for name, columns in analysis.network_segments(result).items():
+                src[name].data = columns
+        elif kind == "packing" and result.state.forces_known:
+            for name, columns in analysis.force_scatter(result).items():
+                src["forces" if name == "points" else "lines"].data = columns
+        elif kind == "fractal":
+            for name, columns in analysis.structure_curve(result).items():
+                src[name].data = columns
+        elif kind == "stiffness":
+            self.scene.show_arrows(analysis.mechanism_arrows(result), float(result.state.radii.mean()))
+
     # ------------------------------------------------------------------ the periodic pull
     def _refresh(self) -> None:
         status = self.engine.status()
@@ -333,6 +398,7 @@ class Dashboard:
                 source.stream(columns, rollover=ROLLOVER)
         self._update_fit()
         self._update_cone(status)
+        self._update_analysis()
         self.load_name.options = self.engine.saved_files()
 
     def _sync(self, status: dict) -> None:
@@ -408,8 +474,8 @@ class Dashboard:
             pn.pane.Markdown("**View**"), self.color, self.watch, self.watch_button,
             pn.pane.Markdown("**Files**"), self.save_name, self.save, self.load_name, self.load,
             width=300)
-        main = pn.Column(self.status_line, pn.Row(self.scene_pane, self.teaching), self.plots,
-                         sizing_mode="stretch_width")
+        main = pn.Column(self.status_line, pn.Row(self.scene_pane, self.teaching), self.tab_choice, self.plots,
+                         self.analysis_view, sizing_mode="stretch_width")
         page = pn.Row(controls, main, sizing_mode="stretch_width")
         pn.state.add_periodic_callback(self._refresh, period=200)
         return page

@@ -25,11 +25,14 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from engine.analysis.report import ANALYSES
+from engine.analysis.states import PackingState, read_state
 from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io import h5md
 from engine.io.jsonsafe import jsonable
 from engine.protocols.presets import PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset, preset_settings
 
+from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, SeriesBuffer
 from .frames import FrameData, build_frame
 from .scene import SceneFrame
@@ -125,6 +128,7 @@ class LabEngine:
         self._history: deque = deque()
         self._rate = deque()
         self._thread = threading.Thread(target=self._loop, name="granlab-engine", daemon=True)
+        self.analysis = AnalysisRunner(on_done=self._analysis_done)
         self.source: Preset | Replay = make_preset(preset, preset_settings(preset, **changes))
         self._reset_buffers()
         self._publish()
@@ -137,6 +141,7 @@ class LabEngine:
         self._stop.set()
         self.submit("wake")
         self._thread.join(timeout=10)
+        self.analysis.close()
 
     @property
     def alive(self) -> bool:
@@ -144,7 +149,7 @@ class LabEngine:
 
     def submit(self, command: str, **payload) -> None:
         """Queue a command (``apply``, ``preset``, ``reset``, ``play``, ``pause``, ``step``, ``watch``,
-        ``watch_disk``, ``save``, ``load``); it never blocks. Its outcome arrives in :attr:`messages`."""
+        ``watch_disk``, ``save``, ``load``, ``analyze``); it never blocks. Its outcome arrives in :attr:`messages`."""
         self.commands.put((command, payload, time.perf_counter()))
 
     def frame(self, seen: int = -1, timeout: float = 0.0) -> tuple[int, SceneFrame | None]:
@@ -237,6 +242,8 @@ class LabEngine:
                 self._save(payload["name"])
             elif command == "load":
                 self._load(payload["name"])
+            elif command == "analyze":
+                self._analyze(payload["kind"])
             self.command_ms = 1000.0 * (time.perf_counter() - submitted)
             self._publish()
         except (GranLabError, ValueError, OSError) as error:
@@ -330,7 +337,8 @@ class LabEngine:
         status.update(state="error" if self.error else ("running" if self.running else "paused"), error=self.error,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
-                      presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history))
+                      presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history),
+                      analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy)
         status = jsonable(status)
         with self._lock:
             self._status = status
@@ -367,6 +375,24 @@ class LabEngine:
         self._switch(Replay(path))
         self.running = True
         self._info(f"replaying {path.name} ({self.source.count} frames)")
+
+    def _analyze(self, kind: str) -> None:
+        """Hand the current state to the analysis thread: a snapshot of the running preset (its
+        first view), or the replayed frame as its run file holds it."""
+        if kind not in ANALYSES:
+            raise ParameterError("analysis", kind, f"one of {', '.join(ANALYSES)}")
+        if isinstance(self.source, Preset):
+            state = PackingState.from_snapshot(self.source.views()[0].sim.snapshot(), source=self.source.title)
+        else:
+            state = read_state(self.source.path, self.source.index)
+        self.analysis.request(state, kind)
+        self._info(f"analysis: {kind} of the state at t = {state.time:.4g} started")
+
+    def _analysis_done(self, result: AnalysisResult) -> None:
+        if result.error:
+            self.messages.extend([("error", f"analysis {result.kind}: {result.error}")])
+        else:
+            self._info(f"analysis: {result.kind} done in {result.report.timings['total']:.2f} s")
 
     def _info(self, text: str) -> None:
         self.messages.extend([("info", text)])

@@ -57,6 +57,7 @@ SPOKE_THICKNESS = 0.08
 WATCHED_THICKNESS = 0.85
 WALL_THICKNESS = 0.2
 CELL_THICKNESS = 0.1
+MECHANISM_THICKNESS = 0.25
 """Line thicknesses as fractions of the mean radius (world units)."""
 
 # Colours are sRGB as they should appear on screen; see srgb_to_linear for what
@@ -68,6 +69,7 @@ WATCHED_COLOR = (230, 0, 230)
 SPOKE_COLOR = (25, 25, 25)
 WALL_COLOR = (60, 60, 60)
 CELL_COLOR = (110, 110, 170)
+MECHANISM_COLOR = (0, 150, 60)
 
 COORDINATION_COLORS = np.array(
     [
@@ -324,6 +326,7 @@ class SceneView:
         self._watched = lines("watched", WATCHED_COLOR)
         self._walls = lines("walls", WALL_COLOR)
         self._cell = lines("cell", CELL_COLOR)
+        self._mechanism = lines("mechanism", MECHANISM_COLOR)
         scene.on_click()(self._on_scene_click)
 
     @property
@@ -340,9 +343,9 @@ class SceneView:
     def handles(self) -> dict:
         """The viser handles, to read back what was sent: "disks" (batched mesh,
         None before the first draw), "spokes", "forces" (list, class 0 first),
-        "watched", "walls", "cell" (line segments)."""
+        "watched", "walls", "cell", "mechanism" (line segments)."""
         return {"disks": self._disks, "spokes": self._spokes, "forces": list(self._forces),
-                "watched": self._watched, "walls": self._walls, "cell": self._cell}
+                "watched": self._watched, "walls": self._walls, "cell": self._cell, "mechanism": self._mechanism}
 
     @property
     def connected_clients(self) -> int:
@@ -379,6 +382,14 @@ class SceneView:
             count = len(self._draw_times)
         window = min(2.0, now - self._created)
         return count / window if window > 0.0 else 0.0
+
+    def show_arrows(self, segments: np.ndarray, mean_radius: float) -> None:
+        """Draw (S, 2, 2) segments above the disks: the arrows of a mechanism found by the
+        Analysis tab, where the disks were when it was analysed. No segments hide them."""
+        with self._lock, self._server.atomic():
+            z = 3.0 * self._disk_top + DISK_HEIGHT * mean_radius
+            self._show(self._mechanism, _segments_3d(np.asarray(segments, dtype=float).reshape(-1, 2, 2), z),
+                       MECHANISM_THICKNESS * mean_radius)
 
     def close(self) -> None:
         """Stop the viser server."""

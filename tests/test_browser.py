@@ -181,3 +181,16 @@ def test_invalid_value_shows_a_message_and_the_server_survives(page, lab):
     assert s["settings"]["amplitude"] == before and s["state"] in ("running", "paused")
     step = s["step"]
     wait_status(lab, lambda s: s["step"] > step)
+
+
+def test_analysis_tab_draws_the_force_network_of_the_current_state(page, lab):
+    open_dashboard(page, lab, "ratchet16")
+    before = status(lab)["analysis_seq"]
+    page.locator(".tab-choice button", has_text="Analysis").click()
+    page.select_option(".analysis-select select", value="status")
+    page.click(".analysis-button button")
+    s = wait_status(lab, lambda s: s["analysis_seq"] > before, timeout=60)
+    expect(page.locator(".analysis-summary")).to_contain_text("critical_contacts", timeout=30000)
+    page.wait_for_function("() => Bokeh.documents[0].get_model_by_name('analysis-segments').data.x0.length > 0",
+                           polling=200, timeout=30000)
+    assert source_length(page, "analysis-segments") >= s["particles"]  # a packed box: more contacts than disks

@@ -164,3 +164,28 @@ def test_refused_file_names_leave_the_data_folder_untouched(engine, tmp_path):
     level, text = last_message(engine, cursor)[-1]
     assert level == "error" and "missing.h5" in text
     assert engine.status()["preset"] == "ratchet16" and engine.status()["state"] == "running"
+
+
+def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):
+    """The status analysis of the running box: the engine keeps stepping while it runs, the
+    result is the analysis of the state taken when the command arrived, and the plot data
+    follow from it (one segment per contact, a marker per critical contact)."""
+    from app.analysis import mechanism_arrows, network_segments
+    from engine.analysis.report import analyze
+
+    engine.submit("analyze", kind="status")
+    result = wait(lambda: engine.analysis.latest() if engine.analysis.latest().seq == 1 else None)
+    assert result.error == "" and result.kind == "status"
+    wait(lambda: engine.status()["time"] > result.state.time)  # the engine went on
+    again = analyze(result.state, "status")
+    assert again.values == result.report.values
+    plots = network_segments(result)
+    assert len(plots["segments"]["x0"]) == result.report.values["contacts"]
+    assert len(plots["critical"]["x"]) == result.report.values["critical_contacts"]
+    engine.submit("analyze", kind="stiffness")
+    result = wait(lambda: engine.analysis.latest() if engine.analysis.latest().seq == 2 else None)
+    arrows = mechanism_arrows(result)
+    assert arrows.shape[1:] == (2, 2) and len(arrows) % 3 == 0
+    assert (len(arrows) > 0) == (result.report.values["null_modes"] > 0)
+    engine.submit("analyze", kind="volume")
+    wait(lambda: any("analysis = 'volume' is not allowed" in text for _, text in last_message(engine)))
