@@ -54,6 +54,10 @@ stopping at ``pi / a`` gave d_F too large by up to 0.09 for d_F <= 1.5, the cros
 models only roughly, then weighing more."""
 D_F_RANGE = (0.0, 3.0)
 """A fit ending outside this range of d_F counts as failed (I(k) is then no power law)."""
+MIN_XI_K_MAX = 2.0
+"""A fit whose blob size ``xi`` is below ``MIN_XI_K_MAX / k_max`` (about a / pi) counts as failed: Eq. 28
+is then flat over the whole fitted range and its d_F describes no power law there (a dense packing
+fits that way)."""
 NOT_FINITE_RESIDUAL = 1e3
 """Residual of log I put where Eq. 28 overflows during the fit, so that Levenberg-Marquardt steps back."""
 
@@ -271,7 +275,7 @@ def fit_structure(k, intensity, phi: float, diameter: float | None = None, k_ran
     (``nan`` near ``d_F = 2``, where ``ell`` drops out of Eq. 28). With ``ell`` fixed B follows from
     ``d_F`` and ``xi`` and the fit has three. Starts from several blob sizes (``xi`` from
     ``2 / k_max`` to ``2 / k_min``) and keeps the best fit. Raises :class:`FitError` when none
-    converges to ``D_F_RANGE[0] < d_F < D_F_RANGE[1]``.
+    converges to ``D_F_RANGE[0] < d_F < D_F_RANGE[1]`` with ``xi >= MIN_XI_K_MAX / k_max``.
     """
     k = np.asarray(k, dtype=float)
     intensity = np.asarray(intensity, dtype=float)
@@ -321,12 +325,14 @@ def fit_structure(k, intensity, phi: float, diameter: float | None = None, k_ran
                 result = scipy.optimize.least_squares(residual, start, method="lm", x_scale="jac")
         except (ValueError, OverflowError):
             continue
-        good = result.success and np.all(np.isfinite(result.x)) and D_F_RANGE[0] < result.x[0] < D_F_RANGE[1]
+        good = (result.success and np.all(np.isfinite(result.x)) and D_F_RANGE[0] < result.x[0] < D_F_RANGE[1]
+                and math.exp(result.x[1]) * k_max >= MIN_XI_K_MAX)
         if good and (best is None or result.cost < best.cost):
             best = result
     if best is None:
         raise FitError(f"the fit of Eq. 28 to I(k) on {kk.size} bins in k = [{k_min:.4g}, {k_max:.4g}] did not "
-                       f"converge to a fractal dimension in {D_F_RANGE}: I(k) does not decay like a power law "
+                       f"converge to a fractal dimension in {D_F_RANGE} with a blob size xi >= "
+                       f"{MIN_XI_K_MAX:g} / k_max: I(k) does not decay like a power law "
                        f"there (a dense or random packing has no fractal range)")
     d, xi, amplitude, constant = unpack(best.x)
     variance = 2.0 * best.cost / max(1, kk.size - best.x.size)
