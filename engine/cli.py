@@ -8,6 +8,8 @@
   (``--analysis PACKING.h5``: the wall time of every analysis instead);
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
+- ``granlab reproduce {gilabert-method1,gilabert-method2} [--samples S] [--particles N] [--json]``:
+  Gilabert's preparation tables measured on Dask beside the published values;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
@@ -29,6 +31,7 @@ import numba
 from .analysis.report import ANALYSES, LOADS
 from .errors import GranLabError
 from .io.jsonsafe import jsonable
+from .reproduce import REPRODUCTIONS
 
 
 def _float(text: str) -> float:
@@ -252,6 +255,35 @@ def _print_study(result: dict) -> None:
         print(f"  failed: seed {failure['seed']} ({failure['model']}): {failure['error']}")
 
 
+def _reproduce(args) -> dict:
+    from .reproduce import Reproduction, run_reproduction
+    from .studies import text_progress
+
+    reproduction = Reproduction(args.table, particles=args.particles, samples=args.samples, first_seed=args.seed,
+                                max_time=args.max_time)
+    return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
+                            progress=None if args.json else text_progress)
+
+
+def _print_reproduce(result: dict) -> None:
+    settings = result["settings"]
+    print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case, "
+          f"{result['wall_time_s']:.1f} s on {result['scheduler']}")
+    print(f"    {'quantity':<14}{'measured (mean ± s.e.)':<26}{'published':<24}source")
+    for case in result["cases"]:
+        zero = case.get("balanced_at_zero_pressure")
+        print(f"  {case['case']}: {case['equilibrated']}/{case['completed']} samples in equilibrium"
+              + ("" if zero is None else f" ({zero} balanced at P* = 0)"))
+        for name, q in case["quantities"].items():
+            digits = 4 if name.startswith("phi") else 3
+            measured = "-" if q["mean"] is None else f"{q['mean']:.{digits}f}" + \
+                ("" if q["sem"] is None else f" ± {q['sem']:.{digits}f}") + f" (n = {q['n']})"
+            ref = q["published"]
+            print(f"    {name:<14}{measured:<26}{ref['value']:g} ± {ref['error']:g}".ljust(68) + ref["source"])
+    for failure in result["failed"]:
+        print(f"  failed: {failure['case']}, seed {failure['seed']}: {failure['error']}")
+
+
 def _info(args) -> dict:
     from .io.h5md import summary
 
@@ -384,6 +416,19 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")
     ratchet.set_defaults(handler=_study, printer=_print_study)
+
+    reproduce = commands.add_parser("reproduce", help="reproduce a paper's table on Dask, beside the published values")
+    reproduce.add_argument("table", choices=tuple(REPRODUCTIONS),
+                           help="Gilabert et al. method 1 (Tables II, III) or method 2 (Tables IV, V, VII)")
+    reproduce.add_argument("--samples", type=_positive_int, default=2, help="samples per case (default 2)")
+    reproduce.add_argument("--particles", type=_positive_int, default=100, help="disks per sample (default 100)")
+    reproduce.add_argument("--max-time", type=_float, default=500.0,
+                           help="simulated-time limit of each preparation stage, in T0 (default 500)")
+    reproduce.add_argument("--seed", type=int, default=0, help="first seed")
+    reproduce.add_argument("--workers", type=_positive_int, help="local Dask workers (default: one per core)")
+    reproduce.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
+    reproduce.add_argument("--json", action="store_true", help="print one JSON object")
+    reproduce.set_defaults(handler=_reproduce, printer=_print_reproduce)
 
     analyze = commands.add_parser("analyze", help="quasi-static and structural analysis of one frame of a run file")
     analyze.add_argument("runfile", help="a GranLab run file or any H5MD file with positions, radii and a 2D box")

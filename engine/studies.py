@@ -2,8 +2,9 @@
 
 Each sample is prepared once (:func:`engine.protocols.prepare.compress`) and then cycled with
 each requested tangential model, writing one run file per model and sample. Samples run in
-parallel on a dask.distributed cluster: a local one on all cores (one single-threaded worker
-process per core), or an existing one given by its scheduler address.
+parallel on a dask.distributed cluster (:func:`run_tasks`, shared with :mod:`engine.reproduce`): a
+local one on all cores (one single-threaded worker process per core), or an existing one given by
+its scheduler address.
 """
 
 from __future__ import annotations
@@ -131,7 +132,7 @@ def touching_pairs(sim) -> list[tuple[int, int]]:
 
 def _failure(study, seed, model, error) -> dict:
     return {"seed": seed, "model": model, "dgamma": None, "ratcheting": None, "error": f"{type(error).__name__}: {error}",
-            "traceback": traceback.format_exc(limit=3)}
+            "traceback": "".join(traceback.format_exception(type(error), error, error.__traceback__, limit=3))}
 
 
 def summarize(study: RatchetStudy, results: list[dict]) -> dict:
@@ -170,11 +171,35 @@ def warm_up() -> None:
 def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir: str | None = None,
                       progress=None, workers: int | None = None) -> dict:
     """Run every sample on Dask and summarise. ``progress(done, total)`` is called as samples finish."""
-    from distributed import Client, LocalCluster, as_completed
-
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
+    seeds = range(study.first_seed, study.first_seed + study.samples)
+    outcomes = run_tasks(ratchet_sample, [(study, seed, out_dir) for seed in seeds],
+                         [f"ratchet-sample-{seed}" for seed in seeds], scheduler=scheduler, workers=workers,
+                         warm_up=warm_up, progress=progress)
+    results = []
+    for seed, outcome in zip(seeds, outcomes):
+        if isinstance(outcome, Exception):  # a lost worker: report, go on
+            results.extend(_failure(study, seed, model, outcome) for model in study.models)
+        else:
+            results.extend(outcome)
+    summary = summarize(study, results)
+    summary["wall_time_s"] = time.perf_counter() - start
+    summary["scheduler"] = scheduler or "local"
+    return summary
+
+
+def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | None = None,
+              workers: int | None = None, warm_up=None, progress=None) -> list:
+    """``function(*task)`` for every task on Dask, in the order of ``tasks``: its result, or the
+    exception raised by a task whose worker was lost (the others go on).
+
+    Without ``scheduler``, ``warm_up()`` compiles the kernels first and a local cluster starts with
+    ``workers`` (default: all cores) single-threaded worker processes; ``scheduler`` is the address
+    of an existing one. ``progress(done, total)`` is called as tasks finish."""
+    from distributed import Client, LocalCluster, as_completed
+
     cluster = None
     try:
         if scheduler:
@@ -183,30 +208,25 @@ def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir
             except (OSError, TimeoutError) as error:
                 raise GranLabError(f"cannot reach the Dask scheduler at {scheduler!r}: {error}") from error
         else:
-            warm_up()
+            if warm_up is not None:
+                warm_up()
             cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         with client:
-            seeds = range(study.first_seed, study.first_seed + study.samples)
-            futures = [client.submit(ratchet_sample, study, seed, out_dir, key=f"ratchet-sample-{seed}", pure=False)
-                       for seed in seeds]
-            results = []
+            futures = [client.submit(function, *task, key=key, pure=False) for task, key in zip(tasks, keys)]
+            outcomes = {}
             for done, future in enumerate(as_completed(futures), start=1):
                 try:
-                    results.extend(future.result())
+                    outcomes[future.key] = future.result()
                 except Exception as error:  # a lost worker: report, go on
-                    seed = study.first_seed + futures.index(future)
-                    results.extend(_failure(study, seed, model, error) for model in study.models)
+                    outcomes[future.key] = error
                 if progress is not None:
                     progress(done, len(futures))
     finally:
         if cluster is not None:
             cluster.close()
-    summary = summarize(study, results)
-    summary["wall_time_s"] = time.perf_counter() - start
-    summary["scheduler"] = scheduler or "local"
-    return summary
+    return [outcomes[key] for key in keys]
 
 
 def text_progress(done: int, total: int, stream=sys.stderr) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -148,7 +149,8 @@ def touching_contacts(sim: Simulation) -> int:
 def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
             speed: float | None = None, seed: int = 0, diameter: float = 1.0, max_time: float = 4000.0,
             max_strain_rate: float = 1e-3, accelerated: bool = False, soft_kappa: float = 100.0,
-            cell_mass: float | None = None, dt_safety: float = 0.3) -> Prepared:
+            cell_mass: float | None = None, dt_safety: float = 0.3,
+            on_stage: Callable[[str, Simulation], None] | None = None) -> Prepared:
     """Gilabert Sec. III B, for cohesive laws.
 
     1. A gas at ``solid_fraction`` with Maxwellian velocities of mean quadratic velocity ``speed``
@@ -161,6 +163,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
 
     ``accelerated`` (series B): aggregate with soft contacts ``kappa = soft_kappa`` and then
     stiffen them slowly to the law's ``kappa`` before stage 2. ``max_time`` bounds each stage.
+    ``on_stage(name, sim)`` is called at the end of each stage (``aggregation``, ``relaxation``:
+    the packing at ``P* = 0`` of Gilabert Table IV, ``compression``).
     """
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
@@ -192,16 +196,22 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     if accelerated:
         _stiffen(sim, target_kn, law)
     sim_time += sim.time
+    if on_stage is not None:
+        on_stage("aggregation", sim)
     # stage 2: relaxation with the cell free at zero stress
     sim.set_cell_stress(0.0, max_strain_rate)
     relaxation = relax(sim, 0.0, max_time, kinetic=False)
     stages["relaxation"] = (relaxation.sim_time, relaxation.wall_time_s)
     sim_time += relaxation.sim_time
+    if on_stage is not None:
+        on_stage("relaxation", sim)
     # stage 3: compression to the target pressure
     sim.set_cell_stress(pressure, max_strain_rate)
     relaxation = relax(sim, pressure, max_time)
     stages["compression"] = (relaxation.sim_time, relaxation.wall_time_s)
     sim_time += relaxation.sim_time
+    if on_stage is not None:
+        on_stage("compression", sim)
     return Prepared(sim, relaxation.report, sim_time, time.perf_counter() - start, "2B" if accelerated else "2",
                     pressure, stages)
 

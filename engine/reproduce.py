@@ -1,0 +1,290 @@
+"""Reproducing Gilabert, Roux & Castellanos, Phys. Rev. E 75, 011303 (2007): packings of model
+cohesive powders prepared by methods 1 and 2, measured and set beside the published values.
+
+- ``gilabert-method1`` (Sec. III A, Tables II and III): a gas at ``Phi_I = 0.36`` compressed at
+  once by the isotropic pressure; cohesionless (``P / K_N = 1e-5``: ``kappa = K_N / P = 1e5``) and
+  cohesive (``P* = P a / F0 = 0.01``, ``kappa = K_N a / F0 = 1e5``), ``mu = 0.15`` and ``0.5``, with
+  and without rolling resistance (RR: ``mu_r = 1e-2 mu a``, Table I). Measured: ``Phi`` and ``z``.
+- ``gilabert-method2`` (Sec. III B, series A: ``Phi_I = 0.36``, ``kappa = 1e5``, ``mu = 0.5``,
+  ``V0 = 9.48 V*``, strain rate at most ``0.05 / T0``), without and with RR: ``Phi`` and ``z`` at
+  ``P* = 0`` (Table IV) and ``P* = 0.01`` (Table V), ``d_F`` and ``xi`` of the fit of Eq. 28
+  (Table VII) and the mean hole radius ``<R>_w`` at ``P* = 0.01`` (Sec. V D).
+
+``z`` is Gilabert's: the mean number of interactions per disk, rattlers included (``2 M / N``).
+Without cohesion an interaction is a contact carrying at least ``1e-4 P a`` (Sec. III A, as in
+:func:`engine.analysis.packing.packing_stats`); with cohesion every contact and distant attraction
+counts, those carrying no force included (Sec. IV A: a quarter of the contacts at ``P* = 0``).
+
+Units: the largest diameter ``a``, the mass of a disk of diameter ``a`` and ``F0`` (cohesive) or
+``P a`` (cohesionless), so ``T0 = sqrt(m a / F0) = 1``. Samples run in parallel on Dask
+(:func:`engine.studies.run_tasks`), one thread each; a sample's numbers depend on its seed only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from dataclasses import asdict, dataclass
+
+import numba
+import numpy as np
+
+from .analysis.packing import packing_stats
+from .errors import GranLabError, ParameterError
+from .protocols.equilibrium import equilibrium
+from .protocols.prepare import gilabert_law, method1, method2
+from .state import STATUS_NONE
+from .studies import run_tasks
+
+PHI_I = 0.36
+"""Solid fraction of the initial gas (the I-state; Tables II-V use ``Phi_I = 0.3631 ± 0.0006``)."""
+P_STAR = 0.01
+"""Reduced pressure ``P* = P a / F0`` of the cohesive samples (and ``P / K_N = 1e-5`` without cohesion)."""
+KAPPA = 1e5
+"""Stiffness parameter (Table I): ``K_N a / F0``, or ``K_N / P`` without cohesion."""
+SPEED = 9.48
+"""Method 2: ``V0 = 9.48 V*``, ``V* = sqrt(F0 D0)`` (Sec. III B 1, Eq. 7)."""
+MAX_STRAIN_RATE = 0.05
+"""Method 2: the strain rate is capped at ``0.05 / T0`` (Sec. III B 1)."""
+
+
+@dataclass(frozen=True)
+class Published:
+    """A published value with its error bar, and where it is printed."""
+
+    value: float
+    error: float
+    source: str
+
+
+def _row(source: str, *numbers: float) -> tuple[Published, ...]:
+    """``(value, error, value, error, ...)`` of a printed row."""
+    return tuple(Published(v, e, source) for v, e in zip(numbers[::2], numbers[1::2]))
+
+
+# Tables II and III: rows are Phi_I, columns (no RR mu 0.15, no RR mu 0.5, RR mu 0.15, RR mu 0.5);
+# the error bars are standard deviations over the samples (Sec. III A).
+METHOD1_COLUMNS = ((0.15, False), (0.5, False), (0.15, True), (0.5, True))
+TABLE_II = {
+    "phi": {"0.130 ± 0.001": _row("Table II", 0.8262, 0.0007, 0.811, 0.001, 0.8238, 0.0014, 0.803, 0.002),
+            "0.3631 ± 0.0006": _row("Table II", 0.8256, 0.0005, 0.811, 0.001, 0.8231, 0.0013, 0.805, 0.002),
+            "0.5244 ± 0.0012": _row("Table II", 0.8236, 0.0007, 0.8092, 0.0005, 0.8215, 0.0005, 0.803, 0.011)},
+    "z": {"0.130 ± 0.001": _row("Table II", 3.174, 0.012, 2.607, 0.022, 3.160, 0.024, 2.526, 0.021),
+          "0.3631 ± 0.0006": _row("Table II", 3.187, 0.025, 2.65, 0.02, 3.123, 0.013, 2.475, 0.025),
+          "0.5244 ± 0.0012": _row("Table II", 3.181, 0.015, 2.63, 0.02, 3.15, 0.03, 2.52, 0.02)},
+}
+TABLE_III = {
+    "phi": {"0.130 ± 0.001": _row("Table III", 0.7635, 0.0023, 0.751, 0.001, 0.757, 0.002, 0.709, 0.001),
+            "0.3631 ± 0.0006": _row("Table III", 0.727, 0.001, 0.7232, 0.0012, 0.710, 0.002, 0.688, 0.001),
+            "0.5244 ± 0.0012": _row("Table III", 0.737, 0.002, 0.733, 0.002, 0.7248, 0.0002, 0.733, 0.002)},
+    "z": {"0.130 ± 0.001": _row("Table III", 3.563, 0.005, 3.163, 0.004, 3.189, 0.008, 3.059, 0.003),
+          "0.3631 ± 0.0006": _row("Table III", 3.345, 0.009, 3.103, 0.006, 3.253, 0.003, 2.971, 0.006),
+          "0.5244 ± 0.0012": _row("Table III", 3.189, 0.008, 3.059, 0.003, 3.096, 0.002, 2.851, 0.001)},
+}
+# Tables IV (P* = 0) and V (P* = 0.01), mu = 0.5: rows are the series with their Phi_I, columns
+# (no RR Phi, no RR z, RR Phi, RR z). Series B has kappa = 1e4, the others kappa = 1e5.
+TABLE_IV = {
+    "A0 (Phi_I = 0.1301 ± 0.0003)": _row("Table IV", 0.1303, 0.0003, 3.197, 0.002, 0.1304, 0.0003, 2.656, 0.007),
+    "B (Phi_I = 0.2649 ± 0.0006)": _row("Table IV", 0.265, 0.001, 3.123, 0.004, 0.2652, 0.023, 2.963, 0.006),
+    "A (Phi_I = 0.361 ± 0.007)": _row("Table IV", 0.3616, 0.0003, 3.1407, 0.0016, 0.361, 0.009, 2.660, 0.004),
+}
+TABLE_V = {
+    "B (Phi_I = 0.2649 ± 0.0006)": _row("Table V", 0.448, 0.006, 3.235, 0.003, 0.42, 0.01, 3.085, 0.005),
+    "A (Phi_I = 0.361 ± 0.007)": _row("Table V", 0.472, 0.008, 3.175, 0.003, 0.524, 0.008, 2.973, 0.004),
+}
+# Table VII (series A): columns (no RR P* = 0, no RR P* = 0.01, RR P* = 0, RR P* = 0.01); xi in units of a.
+TABLE_VII = {
+    "d_F": _row("Table VII", 1.925, 0.024, 1.93, 0.04, 1.53, 0.04, 1.51, 0.04),
+    "xi": _row("Table VII", 8.29, 0.15, 6.07, 0.2, 9.3, 0.4, 5.06, 0.21),
+}
+# Sec. V D: <R>_w / a at P* = 0.01 (no RR, RR).
+HOLE_RADIUS = _row("Sec. V D", 6.6, 0.2, 5.47, 0.14)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One column of a table: the contact law of one set of samples."""
+
+    cohesive: bool
+    friction: float
+    rolling: bool
+
+    @property
+    def label(self) -> str:
+        return (f"{'cohesive' if self.cohesive else 'cohesionless'}, mu = {self.friction:g}, "
+                f"{'RR' if self.rolling else 'no RR'}")
+
+
+def method1_cases() -> tuple[Case, ...]:
+    return tuple(Case(cohesive, mu, rolling) for cohesive in (False, True) for mu, rolling in METHOD1_COLUMNS)
+
+
+def method2_cases() -> tuple[Case, ...]:
+    return (Case(True, 0.5, False), Case(True, 0.5, True))
+
+
+def published(name: str, case: Case) -> dict[str, Published]:
+    """The published values of ``case`` in reproduction ``name`` (``Phi_I = 0.36``, series A)."""
+    if name == "gilabert-method1":
+        table = TABLE_III if case.cohesive else TABLE_II
+        column = METHOD1_COLUMNS.index((case.friction, case.rolling))
+        return {q: table[q]["0.3631 ± 0.0006"][column] for q in ("phi", "z")}
+    rr = 1 if case.rolling else 0
+    at_zero = TABLE_IV["A (Phi_I = 0.361 ± 0.007)"]
+    at_p = TABLE_V["A (Phi_I = 0.361 ± 0.007)"]
+    return {"phi_0": at_zero[2 * rr], "z_0": at_zero[2 * rr + 1], "phi": at_p[2 * rr], "z": at_p[2 * rr + 1],
+            "d_F_0": TABLE_VII["d_F"][2 * rr], "xi_0": TABLE_VII["xi"][2 * rr],
+            "d_F": TABLE_VII["d_F"][2 * rr + 1], "xi": TABLE_VII["xi"][2 * rr + 1],
+            "hole_radius_w": HOLE_RADIUS[rr]}
+
+
+REPRODUCTIONS = {"gilabert-method1": method1_cases, "gilabert-method2": method2_cases}
+QUANTITIES = {
+    "gilabert-method1": ("phi", "z"),
+    "gilabert-method2": ("phi_0", "z_0", "d_F_0", "xi_0", "phi", "z", "d_F", "xi", "hole_radius_w"),
+}
+
+
+@dataclass(frozen=True)
+class Reproduction:
+    """The settings of one reproduction: ``samples`` of ``particles`` disks for every case, with
+    seeds ``first_seed, first_seed + 1, ...``; ``max_time`` (simulated time in ``T0``, the force
+    unit being ``F0`` also without cohesion, where ``P = 0.01``) bounds each stage: a sample still
+    out of equilibrium then is measured as it is and counted as not equilibrated."""
+
+    name: str
+    particles: int = 100
+    samples: int = 2
+    first_seed: int = 0
+    max_time: float = 500.0
+
+    def __post_init__(self):
+        if self.name not in REPRODUCTIONS:
+            raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
+        for key, least in (("particles", 2), ("samples", 1)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise ParameterError(key, value, f"a whole number >= {least}")
+        if not self.max_time > 0:
+            raise ParameterError("max_time", self.max_time, "a positive duration")
+
+    @property
+    def cases(self) -> tuple[Case, ...]:
+        return REPRODUCTIONS[self.name]()
+
+
+def coordination(snapshot, cohesive: bool, force_scale: float) -> float:
+    """Gilabert's ``z`` (see the module docstring)."""
+    if not cohesive:
+        return packing_stats(snapshot, force_scale).z
+    c = snapshot.contacts
+    n = snapshot.positions.shape[0]
+    return 2.0 * int(np.count_nonzero((c.status != STATUS_NONE) & (c.j < n))) / n
+
+
+def _fractal(snapshot, prefix: str) -> dict:
+    from .analysis.fractal import fractal_analysis
+
+    try:
+        result = fractal_analysis(snapshot.positions, snapshot.radii, snapshot.box_lengths)
+    except GranLabError as error:  # a grid that cannot be made leaves the other measurements standing
+        return {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": str(error)}
+    if result.fit_error:
+        return {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": result.fit_error}
+    values = {f"d_F{prefix}": result.d_F, f"xi{prefix}": result.xi}
+    if prefix == "":
+        values["hole_radius_w"] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
+    return values
+
+
+def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
+    """Prepare and measure one sample, on one thread; failures are returned, not raised."""
+    start = time.perf_counter()
+    row = {"case": case.label, **asdict(case), "seed": seed}
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        law = gilabert_law(friction=case.friction, kappa=KAPPA, cohesion=case.cohesive, rolling=case.rolling,
+                           pressure=P_STAR)
+        if reproduction.name == "gilabert-method1":
+            prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time)
+        else:
+            def at_zero_pressure(stage, sim):
+                if stage == "relaxation":
+                    snapshot = sim.snapshot()
+                    report = equilibrium(sim, 0.0)
+                    row.update(phi_0=packing_stats(snapshot, report.force_scale).phi,
+                               z_0=coordination(snapshot, True, report.force_scale),
+                               balanced_0=bool(max(report.force, report.moment, report.pressure) < 1.0),
+                               **_fractal(snapshot, "_0"))
+
+            prepared = method2(reproduction.particles, PHI_I, P_STAR, law, speed=SPEED * math.sqrt(
+                law.cohesion_force * law.cohesion_range), seed=seed, max_strain_rate=MAX_STRAIN_RATE,
+                on_stage=at_zero_pressure, max_time=reproduction.max_time)
+        snapshot = prepared.sim.snapshot()
+        stats = packing_stats(snapshot, prepared.report.force_scale)
+        row.update(phi=stats.phi, z=coordination(snapshot, case.cohesive, prepared.report.force_scale),
+                   z_star=stats.z_star, rattlers=stats.rattlers, equilibrated=prepared.equilibrated,
+                   sim_time=prepared.sim_time, error=None)
+        if reproduction.name == "gilabert-method2":
+            row.update(_fractal(snapshot, ""))
+    except Exception as error:  # reported per sample: the others go on
+        row.update(error=f"{type(error).__name__}: {error}", traceback=traceback.format_exc(limit=3))
+    finally:
+        numba.set_num_threads(threads)
+    row["wall_time_s"] = time.perf_counter() - start
+    return row
+
+
+def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
+    """Per case and quantity: mean, standard deviation and standard error over the samples that
+    gave it, beside the published value."""
+    cases = []
+    for case in reproduction.cases:
+        done = sorted((r for r in rows if r["case"] == case.label and r["error"] is None), key=lambda r: r["seed"])
+        reference = published(reproduction.name, case)
+        quantities = {}
+        for quantity in QUANTITIES[reproduction.name]:
+            values = np.array([r[quantity] for r in done if r.get(quantity) is not None], dtype=float)
+            std = float(values.std(ddof=1)) if values.size > 1 else None
+            quantities[quantity] = {
+                "mean": float(values.mean()) if values.size else None, "std": std,
+                "sem": std / math.sqrt(values.size) if std is not None else None, "n": int(values.size),
+                "published": asdict(reference[quantity])}
+        cases.append({"case": case.label, **asdict(case), "completed": len(done),
+                      "equilibrated": sum(1 for r in done if r["equilibrated"]), "quantities": quantities,
+                      "mean_wall_time_s": float(np.mean([r["wall_time_s"] for r in done])) if done else None})
+        if reproduction.name == "gilabert-method2":
+            cases[-1]["balanced_at_zero_pressure"] = sum(1 for r in done if r.get("balanced_0"))
+    failed = [{"case": r["case"], "seed": r["seed"], "error": r["error"]} for r in rows if r["error"]]
+    return {"reproduction": reproduction.name, "settings": asdict(reproduction), "cases": cases,
+            "samples": sorted(rows, key=lambda r: (r["case"], r["seed"])), "failed": failed}
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel a sample needs, before workers start."""
+    law = gilabert_law(friction=0.5, cohesion=True, rolling=True, pressure=P_STAR)
+    _fractal(method1(6, PHI_I, P_STAR, law, max_time=1.0).sim.snapshot(), "")
+
+
+def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, workers: int | None = None,
+                     progress=None) -> dict:
+    """Every sample of every case on Dask (see :func:`engine.studies.run_tasks`), summarised.
+    The cohesive cases with RR, the slowest, are submitted first."""
+    start = time.perf_counter()
+    seeds = range(reproduction.first_seed, reproduction.first_seed + reproduction.samples)
+    cases = sorted(reproduction.cases, key=lambda c: (not c.cohesive, not c.rolling))
+    tasks = [(reproduction, case, seed) for case in cases for seed in seeds]
+    keys = [f"{reproduction.name}-{case.label}-seed{seed}".replace(" ", "") for _, case, seed in tasks]
+    outcomes = run_tasks(gilabert_sample, tasks, keys, scheduler=scheduler, workers=workers, warm_up=warm_up,
+                         progress=progress)
+    rows = []
+    for (_, case, seed), outcome in zip(tasks, outcomes):
+        if isinstance(outcome, Exception):  # a lost worker
+            outcome = {"case": case.label, **asdict(case), "seed": seed, "error": f"{type(outcome).__name__}: {outcome}"}
+        rows.append(outcome)
+    summary = summarize(reproduction, rows)
+    summary["wall_time_s"] = time.perf_counter() - start
+    summary["scheduler"] = scheduler or "local"
+    return summary

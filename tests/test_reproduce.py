@@ -1,0 +1,148 @@
+"""The Gilabert reproductions: published values as printed, Dask equal to serial, the physics of
+small samples, and bad input."""
+
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from engine import ParameterError
+from engine.cli import _print_reproduce
+from engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
+                              TABLE_VII, Case, Published, Reproduction, gilabert_sample, published, run_reproduction,
+                              summarize)
+
+PAPER = Path(__file__).resolve().parents[2] / "shared" / "papers" / "003_8b3722194af85a9b.txt"
+NUMBER = re.compile(r"\d+\.\d+")
+
+
+def granlab(*args):
+    return subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+def _numbers(line):
+    return [float(x) for x in NUMBER.findall(line)]
+
+
+def _flat(row):
+    return [x for p in row for x in (p.value, p.error)]
+
+
+@pytest.fixture(scope="module")
+def paper_lines():
+    if not PAPER.exists():
+        pytest.skip(f"the paper's text is not at {PAPER}")
+    return PAPER.read_text(encoding="utf-8").splitlines()
+
+
+def _block(lines, start, end):
+    """Rows (lines starting with a number) after the line containing ``start``, up to ``end``."""
+    first = next(k for k, line in enumerate(lines) if start in line)
+    last = next(k for k in range(first, len(lines)) if lines[k].startswith(end))
+    return [line for line in lines[first:last] if line[:1].isdigit()]
+
+
+@pytest.mark.parametrize("table, start, end", [(TABLE_II, "Non-Cohesive samples", "TABLE II:"),
+                                               (TABLE_III, "\tCohesive samples", "TABLE III:")])
+def test_tables_ii_and_iii_are_transcribed_as_printed(paper_lines, table, start, end):
+    rows = _block(paper_lines, start, end)
+    assert len(rows) == 6  # three Phi_I, solid fraction then coordination number
+    for line, (quantity, label) in zip(rows, [(q, l) for q in ("phi", "z") for l in table["phi"]]):
+        printed = _numbers(line)
+        assert printed[:2] == _numbers(label)
+        assert printed[2:] == _flat(table[quantity][label])
+
+
+def test_tables_iv_v_vii_and_hole_radius_are_transcribed_as_printed(paper_lines):
+    for table, caption in ((TABLE_IV, "TABLE IV:"), (TABLE_V, "TABLE V:")):
+        end = next(k for k, line in enumerate(paper_lines) if line.startswith(caption))
+        rows = [line for line in paper_lines[end - 6:end] if line[:1].isdigit()]
+        assert len(rows) == len(table)
+        for line, (label, values) in zip(rows, table.items()):
+            assert _numbers(line)[:2] == _numbers(label)
+            assert _numbers(line)[2:] == _flat(values)
+    d_f = next(line for line in paper_lines if line.startswith("d_F\t"))
+    xi = next(line for line in paper_lines if line.startswith("ξ/a\t"))
+    assert _numbers(d_f) == _flat(TABLE_VII["d_F"]) and _numbers(xi) == _flat(TABLE_VII["xi"])
+    text = "\n".join(paper_lines)
+    assert "= 6.6 \\pm 0.2$" in text and "= 5.47 \\pm 0.14$ with RR" in text
+    assert _flat(HOLE_RADIUS) == [6.6, 0.2, 5.47, 0.14]
+
+
+def test_each_case_gets_its_own_column():
+    assert published("gilabert-method1", Case(True, 0.5, True)) == {
+        "phi": Published(0.688, 0.001, "Table III"), "z": Published(2.971, 0.006, "Table III")}
+    assert published("gilabert-method1", Case(False, 0.15, True))["z"] == Published(3.123, 0.013, "Table II")
+    rr = published("gilabert-method2", Case(True, 0.5, True))
+    assert (rr["phi_0"].value, rr["z_0"].value, rr["phi"].value, rr["z"].value) == (0.361, 2.660, 0.524, 2.973)
+    assert (rr["d_F_0"].value, rr["xi_0"].value, rr["d_F"].value, rr["xi"].value) == (1.53, 9.3, 1.51, 5.06)
+    assert published("gilabert-method2", Case(True, 0.5, False))["hole_radius_w"] == Published(6.6, 0.2, "Sec. V D")
+    assert len({(c.friction, c.rolling) for c in Reproduction("gilabert-method1").cases}) == len(METHOD1_COLUMNS)
+
+
+def test_summary_gives_mean_and_standard_error():
+    reproduction = Reproduction("gilabert-method1", samples=3)
+    case = Case(False, 0.15, False)
+    rows = [{"case": case.label, "seed": s, "phi": phi, "z": 3.0, "equilibrated": True, "wall_time_s": 1.0,
+             "error": None} for s, phi in enumerate((0.80, 0.82, 0.84))]
+    rows.append({"case": case.label, "seed": 3, "error": "DivergenceError: boom"})
+    first = summarize(reproduction, rows)["cases"][0]
+    phi = first["quantities"]["phi"]
+    assert phi["mean"] == pytest.approx(0.82) and phi["n"] == 3
+    assert phi["std"] == pytest.approx(0.02) and phi["sem"] == pytest.approx(0.02 / math.sqrt(3))
+    assert phi["published"] == {"value": 0.8256, "error": 0.0005, "source": "Table II"}
+    assert first["quantities"]["z"]["sem"] == 0.0 and first["completed"] == 3
+    assert summarize(reproduction, rows)["failed"] == [{"case": case.label, "seed": 3, "error": "DivergenceError: boom"}]
+
+
+def test_dask_gives_the_numbers_of_a_serial_run(capsys):
+    # short stages (10 T0): out of equilibrium, but every number must still depend on the seed only
+    reproduction = Reproduction("gilabert-method1", particles=30, samples=2, first_seed=5, max_time=10.0)
+    result = run_reproduction(reproduction, workers=1)
+    assert result["failed"] == [] and len(result["samples"]) == 16
+    for row in result["samples"][::5]:
+        case = Case(row["cohesive"], row["friction"], row["rolling"])
+        serial = gilabert_sample(reproduction, case, row["seed"])
+        assert (serial["phi"], serial["z"], serial["sim_time"]) == (row["phi"], row["z"], row["sim_time"])
+    assert [c["quantities"]["phi"]["n"] for c in result["cases"]] == [2] * 8
+    _print_reproduce(result)
+    printed = capsys.readouterr().out
+    assert "cohesive, mu = 0.5, RR: 0/2 samples in equilibrium" in printed and "Table III" in printed
+
+
+def test_method1_compresses_the_gas_and_cohesion_keeps_it_looser():
+    reproduction = Reproduction("gilabert-method1", particles=40)
+    dry = gilabert_sample(reproduction, Case(False, 0.15, False), 0)
+    wet = gilabert_sample(reproduction, Case(True, 0.15, False), 0)
+    assert dry["equilibrated"] and wet["equilibrated"]
+    # Tables II and III: 0.8256 and 0.727 at N = 1400; a 40-disk sample is within a few percent
+    assert PHI_I < wet["phi"] < dry["phi"]
+    assert dry["phi"] == pytest.approx(0.8256, abs=0.03) and wet["phi"] == pytest.approx(0.727, abs=0.04)
+    assert dry["rattlers"] > 0 and dry["z_star"] > dry["z"]
+
+
+def test_method2_barely_moves_at_zero_pressure_then_collapses():
+    row = gilabert_sample(Reproduction("gilabert-method2", particles=30), Case(True, 0.5, False), 0)
+    assert row["error"] is None and row["balanced_0"] and row["equilibrated"]
+    # Table IV: Phi at P* = 0 stays close to Phi_I; Table V: it rises under P* = 0.01, but stays loose
+    assert row["phi_0"] == pytest.approx(PHI_I, abs=0.02)
+    assert row["phi_0"] + 0.05 < row["phi"] < 0.7
+    assert 2.0 <= row["z_0"] <= 4.0 and row["z"] >= 2.0
+
+
+def test_bad_input_is_refused_clearly():
+    with pytest.raises(ParameterError, match="table = 'gilabert-method3' is not allowed: one of gilabert-method1"):
+        Reproduction("gilabert-method3")
+    with pytest.raises(ParameterError, match="samples = 0 is not allowed: a whole number >= 1"):
+        Reproduction("gilabert-method1", samples=0)
+    with pytest.raises(ParameterError, match="max_time = -1.0 is not allowed"):
+        Reproduction("gilabert-method2", max_time=-1.0)
+    process = granlab("reproduce", "gilabert-method1", "--samples", "0")
+    assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
+    process = granlab("reproduce", "gilabert-table9")
+    assert process.returncode == 2 and "invalid choice: 'gilabert-table9'" in process.stderr
+    process = granlab("reproduce", "gilabert-method1", "--max-time", "0")
+    assert process.returncode == 2 and "max_time = 0.0 is not allowed: a positive duration" in process.stderr
