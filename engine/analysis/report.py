@@ -16,8 +16,9 @@ time of each stage. The analyses:
 The load increment of ``stiffness`` and ``status`` (``load``): ``walls`` raises every load on a
 force-controlled wall in proportion; ``random`` pushes each disk with a random force (seeded);
 ``auto`` takes ``walls`` when walls are loaded and ``random`` otherwise (a periodic cell of
-fixed size has no load of its own). The random forces act on the disks that interact and add up
-to zero, so they excite neither rattlers nor a translation of the whole. The principle of minimum sliding holds for any increment.
+fixed size has no load of its own). The random forces act on the disks with at least two
+interactions and add up to zero, so they excite neither rattlers, nor a disk hanging by one
+contact (a mechanism of its own), nor a translation of the whole. The principle of minimum sliding holds for any increment.
 """
 
 from __future__ import annotations
@@ -72,7 +73,9 @@ def load_increment(net: st.Network, load: str = "auto", seed: int = 0) -> tuple[
         return walls / np.linalg.norm(walls), "walls"
     rng = np.random.default_rng(seed)
     out = np.zeros(net.dof)
-    bound = np.setdiff1d(np.arange(net.disks), st.rattler_disks(net))
+    interactions = np.bincount(net.first, minlength=net.disks) + np.bincount(net.second[net.second >= 0],
+                                                                             minlength=net.disks)
+    bound = np.flatnonzero(interactions >= 2)
     forces = rng.normal(size=(len(bound), 2))
     forces -= forces.mean(axis=0)
     out[3 * bound], out[3 * bound + 1] = forces[:, 0], forces[:, 1]
