@@ -115,16 +115,21 @@ def test_null_space_count_matches_dense_linear_algebra():
 def test_the_sparse_solve_and_mechanisms_agree_with_the_dense_ones(monkeypatch):
     """Packings above DENSE_SIZE velocity components go through SuperLU (diagonal pivots on a
     symmetric ordering) and ARPACK: forced onto that path, the 16-disk box with 19 of its 37
-    contacts sliding (k not symmetric) gives the dense answers."""
+    contacts sliding (k not symmetric) gives the dense answers, and so does the enumeration of the
+    2^5 states of five of its critical contacts."""
     from engine.analysis import stiffness as st
 
     net = turned_box(3, 1)
     load = deviatoric_load(net)
     dense_v = st.response(net, load)
     dense = st.mechanisms(net, load)
+    critical = st.critical_contacts(net)[:5]
+    states = st.enumerate_states(net, load, critical)
     monkeypatch.setattr(st, "DENSE_SIZE", 0)
     np.testing.assert_allclose(st.response(net, load), dense_v, rtol=1e-8, atol=1e-12 * np.abs(dense_v).max())
     assert st.mechanisms(net, load).as_dict() == dense.as_dict()
+    assert st.enumerate_states(net, load, critical).as_dict() == states.as_dict()
+    assert len(states.unstable_states) > 0 and states.states_checked == 32  # a case with something to agree on
 
 
 def glued(positions, radii, law: ContactLaw) -> Network:

@@ -120,13 +120,15 @@ def _status(state, clock, load, seed) -> AnalysisReport:
               "dynamics_sliding": int(np.count_nonzero(net.sliding[critical])),
               "solver_sliding": int(np.count_nonzero(solution.sliding[critical])),
               "states_checked": None, "consistent_states": None, "unstable_states": None, "bijective": None}
-    if len(critical) <= st.MAX_ENUMERATED and net.dof <= st.DENSE_SIZE:
+    limit = st.MAX_ENUMERATED if net.dof <= st.DENSE_SIZE else st.MAX_ENUMERATED_SPARSE
+    if len(critical) <= limit:
         enumeration = st.enumerate_states(net, increment, critical)
         clock.lap("enumeration")
         values.update(enumeration.as_dict())
     else:
-        values["enumeration_skipped"] = (f"{len(critical)} critical contacts and {net.dof} velocity components: "
-                                         f"enumeration needs at most {st.MAX_ENUMERATED} and {st.DENSE_SIZE}")
+        values["enumeration_skipped"] = (f"{len(critical)} critical contacts: all states are enumerated for at "
+                                         f"most {st.MAX_ENUMERATED} ({st.MAX_ENUMERATED_SPARSE} above "
+                                         f"{st.DENSE_SIZE} velocity components)")
     plots = {"first": net.first, "second": net.second, "normal_vectors": net.normal, "critical": critical,
              "dynamics_sliding": net.sliding, "solver_sliding": solution.sliding,
              "normal": net.elastic_normal, "tangential": net.tangential}

@@ -551,6 +551,9 @@ class StatusEnumeration:
 
 
 MAX_ENUMERATED = 16
+MAX_ENUMERATED_SPARSE = 6
+"""Above DENSE_SIZE velocity components each state costs a sparse factorisation and an inertia
+count (0.7 s at 16 800): at most 2^6 states are enumerated there."""
 
 
 def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndarray | None = None,
@@ -561,14 +564,18 @@ def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndar
 
     k(𝕊) is assembled as k(all critical stuck) plus, for each sliding critical contact, its own
     change c_a (K S_slide - K S_stick)_a c_aᵀ (quasi-rigidity Eq. 24 changes one block), so a state
-    costs one dense solve and one symmetric eigenvalue problem."""
+    costs one dense solve and one symmetric eigenvalue problem. Above DENSE_SIZE velocity components
+    (at most MAX_ENUMERATED_SPARSE critical contacts) each state is solved and checked sparse."""
     critical = critical_contacts(net) if critical is None else np.asarray(critical, dtype=np.int64)
     mc = len(critical)
     if mc > MAX_ENUMERATED:
         raise ParameterError("critical contacts", mc, f"at most {MAX_ENUMERATED} to enumerate 2^M_c states")
-    if net.dof > DENSE_SIZE:
-        raise ParameterError("velocity components", net.dof, f"at most {DENSE_SIZE} to enumerate states densely")
     load = np.asarray(load_increment, dtype=float)
+    if net.dof > DENSE_SIZE:
+        if mc > MAX_ENUMERATED_SPARSE:
+            raise ParameterError("critical contacts", mc, f"at most {MAX_ENUMERATED_SPARSE} to enumerate 2^M_c states "
+                                                          f"of a packing above {DENSE_SIZE} velocity components")
+        return _enumerate_sparse(net, load, critical, tolerance)
     stuck = _sliding_set(net, critical, np.zeros(mc, dtype=bool))
     base = stiffness_matrix(net, stuck).toarray()
     changes = []
@@ -596,5 +603,30 @@ def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndar
             consistent.append(label)
         sym = 0.5 * (k + k.T)[np.ix_(keep, keep)]
         if scale > 0 and np.linalg.eigvalsh(sym)[0] < -tolerance * scale:
+            unstable.append(label)
+    return StatusEnumeration(critical, 2 ** mc, consistent, unstable, len(images) == 2 ** mc)
+
+
+def _enumerate_sparse(net: Network, load: np.ndarray, critical: np.ndarray, tolerance: float) -> StatusEnumeration:
+    """:func:`enumerate_states` for large packings: per state, k(𝕊) assembled, one sparse solve for
+    the consistency and one inertia count (:func:`count_below`) for the stability."""
+    mc = len(critical)
+    loose = rattler_disks(net)
+    keep = np.ones(net.dof, dtype=bool)
+    for offset in range(3):
+        keep[3 * loose + offset] = False
+    index = np.flatnonzero(keep)
+    images, consistent, unstable = set(), [], []
+    for code in range(2 ** mc):
+        bits = np.array([(code >> b) & 1 for b in range(mc)], dtype=bool)
+        _, _, ok = consistency(net, load, critical, bits)
+        images.add(tuple(ok))
+        label = "".join("1" if b else "0" for b in bits)
+        if ok.all():
+            consistent.append(label)
+        k = stiffness_matrix(net, _sliding_set(net, critical, bits))
+        sym = ((k + k.T) * 0.5).tocsr()[index][:, index].tocsc()
+        scale = float(np.abs(sym.diagonal()).max()) if len(index) else 0.0
+        if scale > 0 and count_below(sym, -tolerance * scale) > 0:
             unstable.append(label)
     return StatusEnumeration(critical, 2 ** mc, consistent, unstable, len(images) == 2 ** mc)
