@@ -69,18 +69,12 @@ class AnalysisRunner:
 
 
 def summary(result: AnalysisResult) -> str:
-    """Markdown lines: the scalar values of the report and its timings."""
+    """Markdown lines: the values of the report and its time."""
     if result.error:
         return f"**{result.kind}**: {result.error}"
     lines = [f"**{result.kind}** of {result.state.source} (t = {result.state.time:.4g}), "
              f"{result.report.timings['total']:.2f} s"]
-    for key, value in result.report.values.items():
-        if isinstance(value, float):
-            lines.append(f"- {key}: {value:.5g}")
-        elif isinstance(value, (bool, int, str)) or value is None:
-            lines.append(f"- {key}: {value}")
-        elif isinstance(value, list) and len(value) <= 16 and not key.endswith("_histogram"):
-            lines.append(f"- {key}: {', '.join(f'{v:.3g}' if isinstance(v, float) else str(v) for v in value)}")
+    lines += [f"- {key}: {text}" for key, text in result.report.lines()]
     return "\n".join(lines)
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numba
 
-from .analysis.report import ANALYSES, LOADS
+from .analysis import ANALYSES, LOADS
 from .errors import GranLabError
 from .io.jsonsafe import jsonable
 from .reproduce import REPRODUCTIONS
@@ -317,19 +317,13 @@ def _analyze(args) -> dict:
 
 
 def _print_analysis(result: dict) -> None:
+    from .analysis.report import describe
+
     print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
           + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
     for key, value in result.items():
-        if key in ("analysis", "source", "particles", "forces_known", "run_file", "timings_s"):
-            continue
-        if isinstance(value, float):
-            value = f"{value:.6g}"
-        elif key.endswith("_histogram") and value is not None:
-            value = f"{len(value[1])} bins from {value[0][0]:.4g} to {value[0][-1]:.4g}"
-        elif isinstance(value, list):
-            value = ", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in value[:12]) + \
-                (f", ... ({len(value)} values)" if len(value) > 12 else "")
-        print(f"  {key}: {value}")
+        if key not in ("analysis", "source", "particles", "forces_known", "run_file", "timings_s"):
+            print(f"  {key}: {describe(key, value)}")
     print("  time: " + ", ".join(f"{k} {v:.3g} s" for k, v in result["timings_s"].items()))
 
 

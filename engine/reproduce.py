@@ -32,10 +32,7 @@ import numpy as np
 
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
-from .protocols.equilibrium import equilibrium
-from .protocols.prepare import gilabert_law, method1, method2
 from .state import STATUS_NONE
-from .studies import run_tasks
 
 PHI_I = 0.36
 """Solid fraction of the initial gas (the I-state; Tables II-V use ``Phi_I = 0.3631 ± 0.0006``)."""
@@ -200,6 +197,9 @@ def _fractal(snapshot, prefix: str) -> dict:
 
 def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
     """Prepare and measure one sample, on one thread; failures are returned, not raised."""
+    from .protocols.equilibrium import equilibrium
+    from .protocols.prepare import gilabert_law, method1, method2
+
     start = time.perf_counter()
     row = {"case": case.label, **asdict(case), "seed": seed}
     threads = numba.get_num_threads()
@@ -264,6 +264,8 @@ def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
 
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel a sample needs, before workers start."""
+    from .protocols.prepare import gilabert_law, method1
+
     law = gilabert_law(friction=0.5, cohesion=True, rolling=True, pressure=P_STAR)
     _fractal(method1(6, PHI_I, P_STAR, law, max_time=1.0).sim.snapshot(), "")
 
@@ -272,6 +274,8 @@ def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, w
                      progress=None) -> dict:
     """Every sample of every case on Dask (see :func:`engine.studies.run_tasks`), summarised.
     The cohesive cases with RR, the slowest, are submitted first."""
+    from .studies import run_tasks
+
     start = time.perf_counter()
     seeds = range(reproduction.first_seed, reproduction.first_seed + reproduction.samples)
     cases = sorted(reproduction.cases, key=lambda c: (not c.cohesive, not c.rolling))

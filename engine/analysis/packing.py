@@ -70,10 +70,14 @@ def solid_fraction(state, area: float | None = None) -> float:
     return float(np.pi * np.sum(state.radii ** 2) / area)
 
 
+def pressure(state) -> float:
+    """(sigma_xx + sigma_yy) / 2 of the state's disk-disk stress (compression positive)."""
+    return 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
+
+
 def force_scale(state) -> float:
     """Gilabert's F1 = max(F0, P a): F0 the cohesion force, P the pressure, a the largest diameter."""
-    pressure = 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
-    return max(float(state.law.cohesion_force), pressure * 2.0 * float(state.radii.max()))
+    return max(float(state.law.cohesion_force), pressure(state) * 2.0 * float(state.radii.max()))
 
 
 def packing_stats(state, force_scale_value: float | None = None, area: float | None = None) -> PackingStats:
@@ -119,16 +123,16 @@ def _force_statistics(state, phi: float, scale: float) -> dict:
     scaled = normal / unit if unit > 0 else normal
     low, high = (float(scaled.min()), float(scaled.max())) if count else (0.0, 1.0)
     theta = np.degrees(np.arctan2(np.abs(tangential), normal))
-    pressure = 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
+    p = pressure(state)
     z = 2.0 * count / n
     diameters = 2.0 * np.asarray(state.radii)
     denominator = z * phi
     return dict(
         force_unit=unit, normal_force_histogram=_histogram(scaled, FORCE_BINS, (low, max(high, low + 1e-12))),
-        theta_histogram=_histogram(theta, THETA_BINS, (0.0, 180.0)), mean_normal_force=mean, pressure=pressure,
-        rumpf_force=float(np.pi * np.mean(diameters ** 2) / np.mean(diameters) * pressure / denominator)
+        theta_histogram=_histogram(theta, THETA_BINS, (0.0, 180.0)), mean_normal_force=mean, pressure=p,
+        rumpf_force=float(np.pi * np.mean(diameters ** 2) / np.mean(diameters) * p / denominator)
         if denominator > 0 else None,
-        rumpf_force_eq18=float(7.0 * np.pi * diameters.max() / 9.0 * pressure / denominator) if denominator > 0 else None,
+        rumpf_force_eq18=float(7.0 * np.pi * diameters.max() / 9.0 * p / denominator) if denominator > 0 else None,
         percolation_force=percolation_force(state, np.hypot(c.normal_force, c.tangential_force),
                                             c.status != STATUS_NONE),
         normal=normal, tangential=tangential)

@@ -29,12 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import GranLabError, ParameterError
+from . import ANALYSES, LOADS
 from . import stiffness as st
 from .packing import packing_stats
 from .states import require_forces
 
-ANALYSES = ("stiffness", "status", "rigidity", "packing", "fractal")
-LOADS = ("auto", "walls", "random")
 
 
 @dataclass
@@ -48,6 +47,23 @@ class AnalysisReport:
 
     def as_dict(self) -> dict:
         return {"analysis": self.kind, **self.values, "timings_s": self.timings}
+
+    def lines(self) -> list[tuple[str, str]]:
+        """``(key, text)`` of every value, for people: numbers to 6 digits, a histogram as its
+        range, a long list cut after 12 values (the CLI and the lab's Analysis tab show these)."""
+        return [(key, describe(key, value)) for key, value in self.values.items()]
+
+
+def describe(key: str, value) -> str:
+    """One value of a report as text (see :meth:`AnalysisReport.lines`)."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if key.endswith("_histogram") and value is not None:
+        return f"{len(value[1])} bins from {value[0][0]:.4g} to {value[0][-1]:.4g}"
+    if isinstance(value, list):
+        return ", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in value[:12]) + \
+            (f", ... ({len(value)} values)" if len(value) > 12 else "")
+    return str(value)
 
 
 class _Clock:

@@ -13,6 +13,7 @@ written before those existed: from ``/parameters``). Any other H5MD file needs p
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,11 +66,6 @@ class PackingState:
     def disks(self) -> int:
         return int(self.radii.shape[0])
 
-    @property
-    def pressure(self) -> float:
-        """(sigma_xx + sigma_yy) / 2 of the disk-disk stress (compression positive)."""
-        return float(0.5 * (self.stress[0, 0] + self.stress[1, 1]))
-
 
 def read_state(path: str | Path, frame: int = -1, friction: float | None = None,
                gap: float = CONTACT_GAP) -> PackingState:
@@ -89,14 +85,8 @@ def read_state(path: str | Path, frame: int = -1, friction: float | None = None,
     if state.disks == 0:
         raise RunFileError(f"frame {frame} of {str(path)!r} holds no disks: nothing to analyse")
     if friction is not None:
-        state = _replace_law(state, state.law.replace(friction=friction))
+        state = dataclasses.replace(state, law=state.law.replace(friction=friction))
     return state
-
-
-def _replace_law(state: PackingState, law: ContactLaw) -> PackingState:
-    values = dict(state.__dict__)
-    values["law"] = law
-    return PackingState(**values)
 
 
 def _granlab_state(f: h5py.File, index: int, path: str) -> PackingState:
