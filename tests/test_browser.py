@@ -185,7 +185,7 @@ def test_invalid_value_shows_a_message_and_the_server_survives(page, lab):
 
 def test_analysis_tab_draws_the_force_network_of_the_current_state(page, lab):
     open_dashboard(page, lab, "ratchet16")
-    before = status(lab)["analysis_seq"]
+    before = wait_status(lab, lambda s: s["stage"] == "cycling")["analysis_seq"]  # compressed: the disks touch
     page.locator(".tab-choice button", has_text="Analysis").click()
     page.select_option(".analysis-select select", value="status")
     page.click(".analysis-button button")

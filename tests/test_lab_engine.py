@@ -173,6 +173,7 @@ def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):
     from app.analysis import mechanism_arrows, network_segments
     from engine.analysis.report import analyze
 
+    wait(lambda: engine.status()["stage"] == "cycling")  # compressed: the disks touch
     engine.submit("analyze", kind="status")
     result = wait(lambda: engine.analysis.latest() if engine.analysis.latest().seq == 1 else None)
     assert result.error == "" and result.kind == "status"
