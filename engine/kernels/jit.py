@@ -1,13 +1,25 @@
-"""Shared JIT flags.
+"""Shared JIT flags, and the freshness stamp of the on-disk kernel cache.
 
 ``nogil`` lets the lab's event loops run while a kernel computes; ``cache``
 keeps compiled kernels on disk; ``error_model="numpy"`` turns a division by
 zero into inf/NaN (caught by the divergence checks) instead of a branch per
 division. The thread-safe layer (OpenMP or TBB) lets parallel kernels be
 launched from several Python threads at once.
+
+Numba judges a cached kernel fresh when its own source file is unchanged, but a
+kernel carries compiled copies of the functions it calls from other files (the
+step kernel of ``integrate.py`` holds the contact loop and the laws). A kernel
+of this package is therefore cached under a stamp of all of its sources and of
+``engine/state.py`` (whose constants are compiled in): changing the contact law
+recompiles every kernel that calls it.
 """
 
+import functools
+import hashlib
+from pathlib import Path
+
 import numba
+from numba.core.caching import CacheImpl, InTreeCacheLocator, UserProvidedCacheLocator, UserWideCacheLocator
 
 numba.config.THREADING_LAYER = "threadsafe"
 
@@ -18,3 +30,37 @@ PARALLEL = dict(JIT, parallel=True)
 #: contact loop, which cost 4.5 us per call on these machines (more than all the work of a
 #: 16-disk step). Numba refuses to compile an allocation in such a kernel.
 KERNEL = dict(JIT, _nrt=False)
+
+KERNELS = Path(__file__).resolve().parent
+SOURCES = tuple(sorted(KERNELS.glob("*.py"))) + (KERNELS.parent / "state.py",)
+
+
+def sources_stamp(paths) -> str:
+    """SHA-256 over the names and contents of ``paths``."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(Path(path).name.encode())
+        digest.update(Path(path).read_bytes())
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def package_stamp() -> str:
+    return sources_stamp(SOURCES)
+
+
+class _PackageStamped:
+    """A Numba cache locator for the kernels of this package, stamped by :func:`package_stamp`."""
+
+    def get_source_stamp(self):
+        return package_stamp()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        if Path(py_file).resolve().parent != KERNELS:
+            return None
+        return super().from_function(py_func, py_file)
+
+
+CacheImpl._locator_classes[:0] = [type(f"Kernels{base.__name__}", (_PackageStamped, base), {})
+                                    for base in (UserProvidedCacheLocator, InTreeCacheLocator, UserWideCacheLocator)]
