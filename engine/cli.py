@@ -190,7 +190,7 @@ def _prepare(args) -> dict:
     else:
         law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
                                    cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
-                                   pressure=args.pressure)
+                                   pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
         common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
                       seed=args.seed)
         if args.method == "1":
@@ -260,7 +260,7 @@ def _reproduce(args) -> dict:
     from .studies import text_progress
 
     reproduction = Reproduction(args.table, particles=args.particles, samples=args.samples, first_seed=args.seed,
-                                max_time=args.max_time)
+                                max_time=args.max_time, rolling_damping_ratio=args.rolling_damping)
     return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
                             progress=None if args.json else text_progress)
 
@@ -327,6 +327,10 @@ def _print_analysis(result: dict) -> None:
     print("  time: " + ", ".join(f"{k} {v:.3g} s" for k, v in result["timings_s"].items()))
 
 
+ROLLING_DAMPING_HELP = ("damping ratio of a viscous rolling moment with --rolling (default 0.8; 0 is Gilabert's "
+                        "undamped rolling spring, with which a disk held by one contact never stops swinging)")
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -382,6 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     prepare.add_argument("--kappa", type=_float, default=1e5, help="stiffness parameter kappa (1, 2)")
     prepare.add_argument("--cohesive", action="store_true", help="method 1 with cohesion (method 2 always is)")
     prepare.add_argument("--rolling", action="store_true", help="rolling resistance (Gilabert Table I)")
+    prepare.add_argument("--rolling-damping", type=_float, default=0.8, metavar="ZETA_R",
+                         help=ROLLING_DAMPING_HELP)
     prepare.add_argument("--speed", type=_float, help="V0 of method 2 (default V* = sqrt(F0 D0))")
     prepare.add_argument("--accelerated", action="store_true", help="method 2 series B: soft, then stiffened")
     prepare.add_argument("--max-time", type=_float, help="simulated-time limit of each stage")
@@ -418,6 +424,8 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--particles", type=_positive_int, default=100, help="disks per sample (default 100)")
     reproduce.add_argument("--max-time", type=_float, default=500.0,
                            help="simulated-time limit of each preparation stage, in T0 (default 500)")
+    reproduce.add_argument("--rolling-damping", type=_float, default=0.8, metavar="ZETA_R",
+                           help=ROLLING_DAMPING_HELP)
     reproduce.add_argument("--seed", type=int, default=0, help="first seed")
     reproduce.add_argument("--workers", type=_positive_int, help="local Dask workers (default: one per core)")
     reproduce.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")

@@ -92,7 +92,10 @@ class ContactLaw(_Replaceable):
       ``|F_t| <= mu N^e`` (Gilabert Eq. 8); ``D_t`` follows ``tangential_model``:
       ``"cundall-strack"`` (ratcheting Eqs. 7-11), ``"alpha"`` (Eqs. 23-25, 30) or
       ``"angle"`` (Eqs. 18-22).
-    - rolling: moment ``-K_r dtheta`` with ``K_r |dtheta| <= mu_r N^e`` (Gilabert Eq. 10).
+    - rolling: moment ``-K_r dtheta - Gamma_r (w_i - w_j)`` with ``|moment| <= mu_r N^e``
+      (Gilabert Eq. 10) and ``Gamma_r = 2 zeta_r sqrt(K_r I_i I_j / (I_i + I_j))`` (``I_i``
+      against a wall). Gilabert has no viscous part (``zeta_r = 0``); with it, a disk held by
+      one contact stops rolling on its partner instead of swinging on the rolling spring for ever.
 
     ``friction`` (mu) and ``rolling_friction`` (mu_r, a length) may be ``inf``.
     """
@@ -108,6 +111,7 @@ class ContactLaw(_Replaceable):
     cohesion_range: float = 0.0
     rolling_stiffness: float = 0.0
     rolling_friction: float = 0.0
+    rolling_damping_ratio: float = 0.0
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -125,6 +129,7 @@ class ContactLaw(_Replaceable):
         set_(self, "cohesion_range", nonnegative("cohesion_range", self.cohesion_range))
         set_(self, "rolling_stiffness", nonnegative("rolling_stiffness", self.rolling_stiffness))
         set_(self, "rolling_friction", nonnegative("rolling_friction", self.rolling_friction, allow_inf=True))
+        set_(self, "rolling_damping_ratio", nonnegative("rolling_damping_ratio", self.rolling_damping_ratio))
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ import numpy as np
 
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
+from .params import nonnegative
 from .state import STATUS_NONE
 
 PHI_I = 0.36
@@ -148,13 +149,18 @@ class Reproduction:
     """The settings of one reproduction: ``samples`` of ``particles`` disks for every case, with
     seeds ``first_seed, first_seed + 1, ...``; ``max_time`` (simulated time in ``T0``, the force
     unit being ``F0`` also without cohesion, where ``P = 0.01``) bounds each stage: a sample still
-    out of equilibrium then is measured as it is and counted as not equilibrated."""
+    out of equilibrium then is measured as it is and counted as not equilibrated.
+    ``rolling_damping_ratio`` is the damping ratio of a viscous rolling moment in the cases with RR
+    (:func:`engine.protocols.prepare.gilabert_law`). The paper has none; with 0, a disk hanging by
+    one contact swings on its rolling spring for ever and the samples never meet the force
+    criterion."""
 
     name: str
     particles: int = 100
     samples: int = 2
     first_seed: int = 0
     max_time: float = 500.0
+    rolling_damping_ratio: float = 0.8
 
     def __post_init__(self):
         if self.name not in REPRODUCTIONS:
@@ -165,6 +171,7 @@ class Reproduction:
                 raise ParameterError(key, value, f"a whole number >= {least}")
         if not self.max_time > 0:
             raise ParameterError("max_time", self.max_time, "a positive duration")
+        nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
 
     @property
     def cases(self) -> tuple[Case, ...]:
@@ -206,7 +213,7 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
     numba.set_num_threads(1)
     try:
         law = gilabert_law(friction=case.friction, kappa=KAPPA, cohesion=case.cohesive, rolling=case.rolling,
-                           pressure=P_STAR)
+                           pressure=P_STAR, rolling_damping_ratio=reproduction.rolling_damping_ratio)
         if reproduction.name == "gilabert-method1":
             prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time)
         else:

@@ -24,7 +24,7 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
                              rolling_distance)
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
-                           TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA)
+                           TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, ZETA_R)
 from .params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
 from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
                     ParticleState, WallState, Workspace)
@@ -52,6 +52,7 @@ def law_vector(law: ContactLaw) -> np.ndarray:
     vector[D0] = law.cohesion_range
     vector[KR] = law.rolling_stiffness
     vector[MU_R] = law.rolling_friction
+    vector[ZETA_R] = law.rolling_damping_ratio
     return vector
 
 
@@ -63,7 +64,8 @@ def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inert
     (a tangential spring moves and turns a disk: ``1/m + r²/I = 3/m`` for a disc).
     With damping ratio ``zeta`` (normal, or tangential ``Gamma_t / (2 sqrt(K_t m_t))`` with
     ``m_t = 1 / (2 max(1/m + r²/I))``) the bound of an explicit damped oscillator is
-    ``2 (sqrt(1 + zeta²) - zeta) / omega_max``.
+    ``2 (sqrt(1 + zeta²) - zeta) / omega_max``. A viscous rolling moment adds the same bound
+    for the rolling springs alone, with ``omega_r² = 2 Z_MAX K_r / I`` and its damping ratio.
     """
     inv_m = float(np.max(1.0 / mass))
     inv_i = float(np.max(1.0 / inertia))
@@ -74,7 +76,15 @@ def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inert
     omega_max = math.sqrt(2.0 * Z_MAX * max(rates))
     zeta_t = law.tangential_damping / (2.0 * math.sqrt(law.tangential_stiffness / (2.0 * inv_t)))
     zeta = max(law.damping_ratio, zeta_t)
-    return 2.0 * (math.sqrt(1.0 + zeta * zeta) - zeta) / omega_max
+    bound = _damped_bound(zeta, omega_max)
+    if law.rolling_damping_ratio > 0 and law.rolling_stiffness > 0:  # no rolling spring: no rolling moment
+        omega_r = math.sqrt(2.0 * Z_MAX * law.rolling_stiffness * inv_i)
+        bound = min(bound, _damped_bound(law.rolling_damping_ratio, omega_r))
+    return bound
+
+
+def _damped_bound(zeta: float, omega: float) -> float:
+    return 2.0 * (math.sqrt(1.0 + zeta * zeta) - zeta) / omega
 
 
 @dataclass(frozen=True)

@@ -135,6 +135,14 @@ def test_energy_budget_error_is_first_order_in_dt():
     assert errors[1] < errors[0] / 1.6
 
 
+def test_energy_budget_closes_with_viscous_rolling_alone():
+    # no normal or tangential damping, no sliding or rolling slip: the damping tally is the rolling dashpots'
+    start, end, error = _box_run(0.05, duration=6.0, friction=float("inf"), damping_ratio=0.0,
+                                 tangential_damping=0.0, rolling_friction=float("inf"), rolling_damping_ratio=0.5)
+    assert end.dissipated_damping > 0.05 * end.dissipated and end.dissipated_sliding == 0
+    assert abs(error) < 3e-3
+
+
 def test_springs_of_opening_contacts_are_tallied():
     # without a Coulomb limit a contact can open with a loaded tangential spring; its energy is forgotten
     start, end, error = _box_run(0.05, duration=6.0, friction=float("inf"), damping_ratio=0.05,

@@ -65,6 +65,34 @@ def test_rolling_resistance_yields_beyond_mu_r_times_normal_force():
     assert sim.energy().dissipated_rolling > 0
 
 
+@pytest.mark.parametrize("zeta_r", [0.0, 0.15])
+def test_a_disk_rocking_on_its_rolling_spring_is_a_damped_oscillator(zeta_r):
+    # rolling without slip on a floor: (I + m r²) theta'' = -K_r theta - Gamma_r theta', with
+    # Gamma_r = 2 zeta_r sqrt(K_r I) against a wall, so theta = (w0 / w_d) exp(-gamma t) sin(w_d t)
+    # with gamma = Gamma_r / (2 I_eff); Gilabert's undamped spring (zeta_r = 0) swings for ever
+    kr, r, m, load, w0 = 1.0, 0.5, 1.0, 10.0, 0.02
+    law = ContactLaw(normal_stiffness=1e5, tangential_stiffness=1e5, friction=math.inf, damping_ratio=0.5,
+                     rolling_stiffness=kr, rolling_friction=math.inf, rolling_damping_ratio=zeta_r)
+    particles = ParticleState([[0.0, r - load / 1e5]], [r], mass=[m])
+    particles.external_force[0] = (0.0, -load)
+    particles.velocity[0] = (-w0 * r, 0.0)  # rolling: the contact point is at rest
+    particles.omega[0] = w0
+    sim = Simulation(particles, law, walls=(Wall((0.0, 1.0), 0.0, name="floor"),))
+    inertia = 0.5 * m * r * r
+    i_eff = inertia + m * r * r
+    gamma = 2.0 * zeta_r * math.sqrt(kr * inertia) / (2.0 * i_eff)
+    w_d = math.sqrt(kr / i_eff - gamma * gamma)
+    errors = []
+    while sim.time < 4.0 * 2.0 * math.pi / w_d:
+        sim.run(20)
+        exact = w0 / w_d * math.exp(-gamma * sim.time) * math.sin(w_d * sim.time)
+        errors.append(sim.contacts.rolling_spring[0] - exact)
+    assert np.max(np.abs(errors)) < 0.01 * w0 / w_d
+    assert sim.energy().dissipated_damping == pytest.approx(
+        0.5 * i_eff * w0 * w0 - 0.5 * i_eff * sim.particles.omega[0] ** 2
+        - 0.5 * kr * sim.contacts.rolling_spring[0] ** 2, rel=0.02, abs=1e-4 * i_eff * w0 * w0)
+
+
 @pytest.mark.parametrize("model", ["cundall-strack", "alpha", "angle"])
 def test_closed_path_changes_the_spring_as_ratcheting_eq17_says(model):
     result = teaching.closed_path(model=model)

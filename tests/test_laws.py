@@ -83,11 +83,21 @@ def test_coulomb_with_infinite_friction_never_slides():
 
 def test_rolling_spring_is_elastic_then_plastic():
     kr, mu_r, ne = 10.0, 0.01, 5.0
-    spring, moment, slip = laws.rolling(kr, mu_r, ne, 0.001)
+    spring, moment, slip = laws.rolling(kr, mu_r, 0.0, ne, 0.001, 0.3)
     assert moment == pytest.approx(-0.01) and slip == 0.0
-    spring, moment, slip = laws.rolling(kr, mu_r, ne, 0.02)
+    spring, moment, slip = laws.rolling(kr, mu_r, 0.0, ne, 0.02, 0.3)
     assert moment == pytest.approx(-mu_r * ne) and spring == pytest.approx(mu_r * ne / kr)
     assert slip == pytest.approx(0.02 - mu_r * ne / kr)
+
+
+def test_viscous_rolling_moment_acts_while_the_spring_holds_and_stays_within_the_limit():
+    kr, mu_r, gamma_r, ne = 10.0, 0.01, 0.1, 5.0
+    spring, moment, slip = laws.rolling(kr, mu_r, gamma_r, ne, 0.001, 0.2)
+    assert moment == pytest.approx(-0.01 - 0.02) and slip == 0.0 and spring == 0.001
+    spring, moment, slip = laws.rolling(kr, mu_r, gamma_r, ne, 0.001, 2.0)
+    assert moment == pytest.approx(-mu_r * ne) and slip == 0.0  # clipped, the spring kept
+    spring, moment, slip = laws.rolling(kr, mu_r, gamma_r, ne, 0.02, -2.0)
+    assert moment == pytest.approx(-mu_r * ne) and slip == pytest.approx(0.02 - mu_r * ne / kr)
 
 
 def test_wrap_angle_range():

@@ -36,10 +36,12 @@ def test_equilibrium_test_rejects_a_moving_packing(box16):
     assert not report.equilibrated and report.kinetic > 1.0
 
 
-@pytest.mark.parametrize("cohesion", [False, True])
-def test_method1_reaches_equilibrium_under_stress_control(cohesion):
+@pytest.mark.parametrize("cohesion, rolling", [(False, False), (True, False), (True, True)])
+def test_method1_reaches_equilibrium_under_stress_control(cohesion, rolling):
+    # with rolling resistance, the rolling dashpot stops the disks that hang by one contact
     pressure = 0.01
-    prepared = method1(60, pressure=pressure, law=gilabert_law(cohesion=cohesion, pressure=pressure), max_time=1500)
+    law = gilabert_law(cohesion=cohesion, rolling=rolling, pressure=pressure, rolling_damping_ratio=0.8)
+    prepared = method1(60, pressure=pressure, law=law, max_time=1500)
     assert prepared.equilibrated
     assert measured_pressure(prepared.sim) == pytest.approx(pressure, abs=1e-4 * prepared.report.force_scale)
     phi = np.pi * np.sum(prepared.sim.particles.radius ** 2) / np.prod(prepared.sim.cell.length)

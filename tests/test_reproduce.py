@@ -140,9 +140,14 @@ def test_bad_input_is_refused_clearly():
         Reproduction("gilabert-method1", samples=0)
     with pytest.raises(ParameterError, match="max_time = -1.0 is not allowed"):
         Reproduction("gilabert-method2", max_time=-1.0)
+    with pytest.raises(ParameterError, match="rolling_damping_ratio = -0.5 is not allowed: a number >= 0"):
+        Reproduction("gilabert-method1", rolling_damping_ratio=-0.5)
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
     assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
     process = granlab("reproduce", "gilabert-table9")
     assert process.returncode == 2 and "invalid choice: 'gilabert-table9'" in process.stderr
     process = granlab("reproduce", "gilabert-method1", "--max-time", "0")
     assert process.returncode == 2 and "max_time = 0.0 is not allowed: a positive duration" in process.stderr
+    process = granlab("prepare", "--method", "1", "--rolling", "--rolling-damping", "-1")
+    assert process.returncode == 2 and "rolling_damping_ratio = -1.0 is not allowed: a number >= 0" in process.stderr
+

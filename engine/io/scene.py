@@ -27,7 +27,7 @@ SIMULATION_KEYS = {"duration", "steps", "dt", "dt_safety", "skin", "max_overlap"
                    "record_every", "threads"}
 CONTACT_KEYS = {"normal_stiffness", "tangential_stiffness", "friction", "damping_ratio", "tangential_damping",
                 "normal_model", "tangential_model", "cohesion_force", "cohesion_range", "rolling_stiffness",
-                "rolling_friction"}
+                "rolling_friction", "rolling_damping_ratio"}
 DISK_KEYS = {"x", "y", "r", "vx", "vy", "omega", "angle", "mass", "density", "inertia", "kind"}
 RADIUS_KEYS = {"radius", "radius_min", "radius_max", "seed"}
 GROUP_KEYS = {"density", "kind", "velocity", "velocity_spread"} | RADIUS_KEYS

@@ -29,8 +29,8 @@ from numba import njit, prange, uint64
 
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL, PARALLEL
-from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, coulomb,
-                   normal_elastic, rolling, wrap_angle)
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, ZETA_R,
+                   coulomb, normal_elastic, rolling, wrap_angle)
 
 # per-chunk scalar tallies
 TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
@@ -96,6 +96,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     angle = p.angle
     omega = p.omega
     radius = p.radius
+    inv_inertia = p.inv_inertia
     wall_normal = w.normal
     wall_offset = w.offset
     wall_velocity = w.velocity
@@ -127,6 +128,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     d0 = law[D0]
     kr = law[KR]
     mu_r = law[MU_R]
+    gamma_r_factor = 2.0 * law[ZETA_R] * math.sqrt(kr)
     eta_factor = 2.0 * law[ZETA] * math.sqrt(kn)
     nw = wall_offset.shape[0]
 
@@ -251,7 +253,13 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             status[k] = state
             if kr > 0.0:
                 roll_trial = 0.0 if fresh else rolling_spring[k] + relative_spin * dt
-                roll, moment, roll_slip = rolling(kr, mu_r, ne, roll_trial)
+                gamma_r = 0.0
+                inv_reduced = inv_inertia[i] + (0.0 if is_wall else inv_inertia[j])
+                if gamma_r_factor > 0.0 and inv_reduced > 0.0:
+                    gamma_r = gamma_r_factor / math.sqrt(inv_reduced)
+                roll, moment, roll_slip = rolling(kr, mu_r, gamma_r, ne, roll_trial, relative_spin)
+                if roll_slip == 0.0:
+                    damping -= (moment + kr * roll) * relative_spin * dt
                 rolling_loss += abs(moment * roll_slip)
                 rolling_spring[k] = roll
         elif f0 > 0.0:

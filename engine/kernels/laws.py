@@ -17,8 +17,8 @@ from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL
 
 # layout of the law vector
-KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R = range(9)
-LAW_SIZE = 9
+KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R, ZETA_R = range(10)
+LAW_SIZE = 10
 
 NORMAL_LINEAR, NORMAL_AREA = 0, 1
 TANGENTIAL_CS, TANGENTIAL_ALPHA, TANGENTIAL_ANGLE = 0, 1, 2
@@ -163,16 +163,17 @@ def coulomb(kt, mu, gamma_t, ne, spring, rate):
 
 
 @njit(**KERNEL)
-def rolling(kr, mu_r, ne, spring):
-    """Elastic-plastic rolling spring (Gilabert Eq. 10).
+def rolling(kr, mu_r, gamma_r, ne, spring, rate):
+    """Elastic-plastic rolling spring (Gilabert Eq. 10), with an optional viscous part.
 
-    ``spring`` is the trial elastic relative rotation; the moment on disk i is
-    ``-K_r spring``, limited by ``mu_r N^e``. Returns ``(spring, moment_i, slip)``.
+    ``spring`` is the trial elastic relative rotation and ``rate = w_i - w_j``; the moment on
+    disk i is ``-K_r spring - Gamma_r rate``, limited by ``mu_r N^e`` (the viscous part acts
+    while the spring holds, like ``Gamma_t`` in :func:`coulomb`). Returns ``(spring, moment_i, slip)``.
     """
-    moment = -kr * spring
+    elastic = -kr * spring
     limit = mu_r * ne
-    if abs(moment) <= limit:
-        return spring, moment, 0.0
-    bounded = limit if moment > 0.0 else -limit
+    if abs(elastic) <= limit:
+        return spring, min(limit, max(-limit, elastic - gamma_r * rate)), 0.0
+    bounded = limit if elastic > 0.0 else -limit
     new_spring = -bounded / kr
     return new_spring, bounded, spring - new_spring

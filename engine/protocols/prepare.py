@@ -91,17 +91,22 @@ def gilabert_radii(count: int, diameter: float = 1.0, seed: int = 0) -> np.ndarr
 
 
 def gilabert_law(friction: float = 0.15, kappa: float = 1e5, cohesion: bool = True, rolling: bool = False,
-                 pressure: float = 0.01, diameter: float = 1.0, damping_ratio: float = 0.8) -> ContactLaw:
+                 pressure: float = 0.01, diameter: float = 1.0, damping_ratio: float = 0.8,
+                 rolling_damping_ratio: float = 0.0) -> ContactLaw:
     """The interaction law of Gilabert Table I, in units of the largest diameter ``a`` and of
     ``F0`` (cohesive: ``F0 = 1``, ``kappa = a K_N / F0``, ``D0 = 1e-3 a``) or of ``P a``
     (cohesionless: ``kappa = K_N / P``); ``K_T = K_N``; with rolling resistance
-    ``K_r = 1e-4 K_N a²`` and ``mu_r = 1e-2 mu a``."""
+    ``K_r = 1e-4 K_N a²`` and ``mu_r = 1e-2 mu a``.
+
+    ``rolling_damping_ratio`` (not in the paper, which has none) adds a viscous rolling moment
+    (see :class:`engine.params.ContactLaw`; without rolling resistance it has nothing to act on)."""
     force_scale = 1.0 if cohesion else pressure * diameter
     kn = kappa * force_scale / diameter
+    kr = 1e-4 * kn * diameter ** 2 if rolling else 0.0
     return ContactLaw(normal_stiffness=kn, tangential_stiffness=kn, friction=friction, damping_ratio=damping_ratio,
                       cohesion_force=1.0 if cohesion else 0.0, cohesion_range=1e-3 * diameter if cohesion else 0.0,
-                      rolling_stiffness=1e-4 * kn * diameter ** 2 if rolling else 0.0,
-                      rolling_friction=1e-2 * friction * diameter if rolling else 0.0)
+                      rolling_stiffness=kr, rolling_friction=1e-2 * friction * diameter if rolling else 0.0,
+                      rolling_damping_ratio=rolling_damping_ratio)
 
 
 def _gas(count, solid_fraction, seed, diameter):

@@ -530,13 +530,13 @@ class AggregationPreset(Preset):
     kappa = 1e3
     pressure = 0.01
     #: longest time of each stage: a stage that has not met its criterion by then ends anyway
-    #: (rolling and tangential springs are undamped: floppy arms can swing for a long time)
+    #: (tangential springs are undamped: floppy arms can swing for a long time)
     stage_limits = {"aggregating": 1000.0, "relaxing": 500.0, "compressing": 1500.0}
 
     def _build(self) -> None:
         s = self.settings
-        law = gilabert_law(friction=s.friction, kappa=self.kappa, cohesion=True,
-                           rolling=s.rolling_friction > 0, damping_ratio=s.damping_ratio)
+        law = gilabert_law(friction=s.friction, kappa=self.kappa, cohesion=True, rolling=s.rolling_friction > 0,
+                           damping_ratio=s.damping_ratio, rolling_damping_ratio=s.damping_ratio)
         if s.rolling_friction > 0:
             law = law.replace(rolling_friction=s.rolling_friction,
                               rolling_stiffness=s.rolling_stiffness or law.rolling_stiffness)
@@ -611,7 +611,7 @@ class CompressionPreset(Preset):
         cohesive = s.cohesion_force > 0
         self.pressure = 0.01 if cohesive else 1.0
         law = gilabert_law(friction=s.friction, kappa=1e3, cohesion=cohesive, rolling=s.rolling_friction > 0,
-                           pressure=self.pressure, damping_ratio=s.damping_ratio)
+                           pressure=self.pressure, damping_ratio=s.damping_ratio, rolling_damping_ratio=s.damping_ratio)
         r, positions, length = _gas(s.particles, 0.36, s.seed, 1.0)
         cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(self.pressure, self.pressure))
         self._sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi), law, Integration(dt_safety=0.3),
