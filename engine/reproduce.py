@@ -195,9 +195,10 @@ def _fractal(snapshot, prefix: str) -> dict:
     except GranLabError as error:  # a grid that cannot be made leaves the other measurements standing
         return {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": str(error)}
     if result.fit_error:
-        return {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": result.fit_error}
-    values = {f"d_F{prefix}": result.d_F, f"xi{prefix}": result.xi}
-    if prefix == "":
+        values = {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": result.fit_error}
+    else:
+        values = {f"d_F{prefix}": result.d_F, f"xi{prefix}": result.xi}
+    if prefix == "":  # the holes do not depend on the fit
         values["hole_radius_w"] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
     return values
 

@@ -6,7 +6,9 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from engine import ParameterError
@@ -151,3 +153,19 @@ def test_bad_input_is_refused_clearly():
     process = granlab("prepare", "--method", "1", "--rolling", "--rolling-damping", "-1")
     assert process.returncode == 2 and "rolling_damping_ratio = -1.0 is not allowed: a number >= 0" in process.stderr
 
+
+def test_a_failed_fit_keeps_the_hole_radius():
+    from engine.reproduce import _fractal
+
+    # a square lattice of overlapping disks with one disk in nine missing: no fractal range, and
+    # holes no wider than a missing disk with its four interstices
+    side = 12
+    x, y = np.meshgrid(np.arange(side) + 0.5, np.arange(side) + 0.5)
+    row, column = np.meshgrid(np.arange(side), np.arange(side), indexing="ij")
+    keep = ~((row % 3 == 1) & (column % 3 == 1)).ravel()
+    positions = np.column_stack([x.ravel(), y.ravel()])[keep]
+    snapshot = SimpleNamespace(positions=positions, radii=np.full(len(positions), 0.52),
+                               box_lengths=np.array([side, side], float))
+    values = _fractal(snapshot, "")
+    assert values["d_F"] is None and "did not converge" in values["fractal_error"]
+    assert 0.3 < values["hole_radius_w"] < 1.0
