@@ -260,7 +260,8 @@ def _reproduce(args) -> dict:
     from .studies import text_progress
 
     reproduction = Reproduction(args.table, particles=args.particles, samples=args.samples, first_seed=args.seed,
-                                max_time=args.max_time, rolling_damping_ratio=args.rolling_damping)
+                                max_time=args.max_time, rolling_damping_ratio=args.rolling_damping,
+                                cell_mass_disks=args.cell_mass_disks)
     return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
                             progress=None if args.json else text_progress)
 
@@ -426,6 +427,9 @@ def build_parser() -> argparse.ArgumentParser:
                            help="simulated-time limit of each preparation stage, in T0 (default 500)")
     reproduce.add_argument("--rolling-damping", type=_float, default=0.8, metavar="ZETA_R",
                            help=ROLLING_DAMPING_HELP)
+    reproduce.add_argument("--cell-mass-disks", type=_positive_int, default=1400, metavar="N",
+                           help="the cell's generalized mass M (Eq. 3) is the paper's for N disks (default 1400, "
+                                "the paper's size: every sample size then compacts at the paper's rate)")
     reproduce.add_argument("--seed", type=int, default=0, help="first seed")
     reproduce.add_argument("--workers", type=_positive_int, help="local Dask workers (default: one per core)")
     reproduce.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")

@@ -153,7 +153,9 @@ class Reproduction:
     ``rolling_damping_ratio`` is the damping ratio of a viscous rolling moment in the cases with RR
     (:func:`engine.protocols.prepare.gilabert_law`). The paper has none; with 0, a disk hanging by
     one contact swings on its rolling spring for ever and the samples never meet the force
-    criterion."""
+    criterion. ``cell_mass_disks``: the cell's generalized mass ``M`` (Eq. 3) is the paper's for a
+    sample of that many disks (default 1400, the paper's size; see
+    :func:`engine.protocols.prepare.cell_mass`), so that every size compacts at the paper's rate."""
 
     name: str
     particles: int = 100
@@ -161,11 +163,12 @@ class Reproduction:
     first_seed: int = 0
     max_time: float = 500.0
     rolling_damping_ratio: float = 0.8
+    cell_mass_disks: int = 1400
 
     def __post_init__(self):
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
-        for key, least in (("particles", 2), ("samples", 1)):
+        for key, least in (("particles", 2), ("samples", 1), ("cell_mass_disks", 1)):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
                 raise ParameterError(key, value, f"a whole number >= {least}")
@@ -216,7 +219,8 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
         law = gilabert_law(friction=case.friction, kappa=KAPPA, cohesion=case.cohesive, rolling=case.rolling,
                            pressure=P_STAR, rolling_damping_ratio=reproduction.rolling_damping_ratio)
         if reproduction.name == "gilabert-method1":
-            prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time)
+            prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time,
+                               cell_mass_disks=reproduction.cell_mass_disks)
         else:
             def at_zero_pressure(stage, sim):
                 if stage == "relaxation":
@@ -229,7 +233,7 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
 
             prepared = method2(reproduction.particles, PHI_I, P_STAR, law, speed=SPEED * math.sqrt(
                 law.cohesion_force * law.cohesion_range), seed=seed, max_strain_rate=MAX_STRAIN_RATE,
-                on_stage=at_zero_pressure, max_time=reproduction.max_time)
+                on_stage=at_zero_pressure, max_time=reproduction.max_time, cell_mass_disks=reproduction.cell_mass_disks)
         snapshot = prepared.sim.snapshot()
         stats = packing_stats(snapshot, prepared.report.force_scale)
         row.update(phi=stats.phi, z=coordination(snapshot, case.cohesive, prepared.report.force_scale),

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from engine import ContactLaw, ParameterError, ParticleState, Simulation, box_walls
+from engine import ContactLaw, ParameterError, ParticleState, PeriodicCell, Simulation, box_walls
 from engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
 from engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
 from engine.protocols.equilibrium import equilibrium, measured_pressure
-from engine.protocols.prepare import clusters, compress, gilabert_law, method1, method2
+from engine.protocols.prepare import _gas, cell_mass, clusters, compress, gilabert_law, method1, method2
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +46,17 @@ def test_method1_reaches_equilibrium_under_stress_control(cohesion, rolling):
     assert measured_pressure(prepared.sim) == pytest.approx(pressure, abs=1e-4 * prepared.report.force_scale)
     phi = np.pi * np.sum(prepared.sim.particles.radius ** 2) / np.prod(prepared.sim.cell.length)
     assert 0.6 < phi < 0.9
+
+
+def test_cell_mass_is_gilabert_s_and_borrows_the_size_of_a_larger_sample():
+    # Gilabert Sec. II A: M = 3/10 of the grain mass over L; the engine's default cell mass is the same
+    r, positions, length = _gas(50, 0.36, 3, 1.0)
+    sim = Simulation(ParticleState(positions, r, density=4.0 / np.pi), gilabert_law(),
+                     cell=PeriodicCell((length, length)))
+    assert cell_mass(r, length) == pytest.approx(sim.cell.mass[0], rel=1e-12)
+    assert cell_mass(r, length, disks=200) == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
+    prepared = method1(50, law=gilabert_law(), seed=3, max_time=1.0, cell_mass_disks=200)
+    assert prepared.sim.cell.mass[0] == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
 
 
 def test_method2_aggregates_into_one_cluster_in_equilibrium():

@@ -144,6 +144,8 @@ def test_bad_input_is_refused_clearly():
         Reproduction("gilabert-method2", max_time=-1.0)
     with pytest.raises(ParameterError, match="rolling_damping_ratio = -0.5 is not allowed: a number >= 0"):
         Reproduction("gilabert-method1", rolling_damping_ratio=-0.5)
+    with pytest.raises(ParameterError, match="cell_mass_disks = 0 is not allowed: a whole number >= 1"):
+        Reproduction("gilabert-method1", cell_mass_disks=0)
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
     assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
     process = granlab("reproduce", "gilabert-table9")
