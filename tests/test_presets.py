@@ -163,6 +163,14 @@ def test_compression_preset_reaches_the_imposed_pressure():
     assert 0.75 < phi < 0.86 and z > 3.0
 
 
+@pytest.mark.parametrize("name", ["aggregation", "compression"])
+def test_gilabert_presets_damp_rolling_with_the_normal_damping_ratio(name):
+    preset = make_preset(name, preset_settings(name, particles=20, rolling_friction=0.005))
+    assert preset.sim.law.rolling_stiffness > 0 and preset.sim.law.rolling_damping_ratio == 0.8
+    preset.apply(damping_ratio=0.5)
+    assert preset.sim.law.damping_ratio == 0.5 and preset.sim.law.rolling_damping_ratio == 0.5
+
+
 def test_watch_disk_toggles_its_contacts():
     preset = make_preset("ratchet16")
     run_until(preset, lambda p: len(mobilisation(p.sim)[1]), steps=200)

@@ -512,7 +512,16 @@ class BlockPreset(Preset):
 
 
 # ---------------------------------------------------------------------------------------------- Gilabert
-class AggregationPreset(Preset):
+class GilabertPreset(Preset):
+    """The presets of Gilabert's preparations: the rolling dashpot's damping ratio is the normal
+    one, ``damping_ratio``, also when that control changes."""
+
+    def _changed(self, changes: dict) -> None:
+        if "damping_ratio" in changes:
+            self._sim.set_law(rolling_damping_ratio=self.settings.damping_ratio)
+
+
+class AggregationPreset(GilabertPreset):
     """Gilabert method 2 live: a cohesive gas aggregates at fixed cell size, then the cell is put
     under stress control, relaxed at P* = 0 and compressed to P* = 0.01 (strain-rate cap).
     Each stage ends at Gilabert's criteria or at its time limit (``stage_limits``).
@@ -594,7 +603,7 @@ class AggregationPreset(Preset):
         self._emit("time", (sim.time, coordination(sim), phi, clusters(sim), sim.energy().kinetic))
 
 
-class CompressionPreset(Preset):
+class CompressionPreset(GilabertPreset):
     """Gilabert method 1 live: a gas at rest at solid fraction 0.36 compressed isotropically to
     P by stress control of the cell. Cohesive if F0 > 0 (P* = 0.01), else P = 1 and
     kappa = K_N / P = 10^3. Series ``time`` (t, z, phi, pressure, kinetic)."""
