@@ -68,6 +68,12 @@ class _Copyable:
         return clone
 
 
+def default_cell_mass(total_mass: float, lengths) -> float:
+    """Gilabert's generalized mass of the cell (Eq. 3, Sec. II A): 3/10 of the grain mass over the
+    cell size ``sqrt(L_x L_y)``."""
+    return 0.3 * total_mass / math.sqrt(float(lengths[0]) * float(lengths[1]))
+
+
 def _column(name: str, value, n: int, default: float, width: int | None = None) -> np.ndarray:
     shape = (n,) if width is None else (n, width)
     if value is None:
@@ -257,8 +263,7 @@ class CellState(_Copyable):
                 self.reference_length[axis] = cell.lengths[axis]
                 if cell.control[axis] == "strain-rate":
                     self.rate[axis] = -cell.strain_rate[axis] * cell.lengths[axis]
-        size = math.sqrt(np.prod([cell.lengths[a] for a in range(2)]))
-        self.mass[0] = cell.mass if cell.mass is not None else 0.3 * total_mass / size
+        self.mass[0] = cell.mass if cell.mass is not None else default_cell_mass(total_mass, cell.lengths)
         self.max_strain_rate[0] = cell.max_strain_rate
 
     @property

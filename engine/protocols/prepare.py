@@ -21,7 +21,7 @@ from ..errors import ParameterError
 from ..generate import radii, random_gas, square_lattice
 from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, positive
 from ..simulation import Simulation
-from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState
+from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState, default_cell_mass
 from .equilibrium import EquilibriumReport, equilibrium, measured_pressure, relax
 
 
@@ -133,7 +133,7 @@ def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = N
     if isinstance(disks, bool) or not isinstance(disks, (int, np.integer)) or disks < 1:
         raise ParameterError("cell_mass_disks", disks, "a whole number >= 1")
     grain_mass = 4.0 / diameter ** 2 * float(np.sum(np.asarray(radii) ** 2))
-    return 0.3 * grain_mass / length * math.sqrt(disks / count)
+    return default_cell_mass(grain_mass, (length, length)) * math.sqrt(disks / count)
 
 
 def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
