@@ -22,7 +22,7 @@ from engine.protocols.presets import PRESETS, LabSettings
 
 from . import analysis
 from .buffers import Cursor
-from .scene import COLOR_FIELDS
+from .drawing import COLOR_FIELDS
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"

@@ -35,7 +35,7 @@ from engine.protocols.presets import PRESETS, RESET_CONTROLS, LabSettings, Prese
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, SeriesBuffer
 from .frames import FrameData, build_frame
-from .scene import SceneFrame
+from .drawing import SceneFrame
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_BYTES = 64 * 2 ** 20
@@ -74,7 +74,6 @@ class Replay:
             walls = h5md.walls_from_json(params["walls_json"])
             self.normals = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
             self.frames = [h5md.read_frame(f, k) for k in range(self.count)]
-            self.wall_offsets = f["observables/walls/position/value"][: self.count]
             fields = [x.decode() for x in f["observables/energy"].attrs["fields"]]
             energy = f["observables/energy/value"][: self.count]
         self.series = {"replay": ("t", "step") + tuple(fields)}
@@ -83,13 +82,7 @@ class Replay:
         self.stage = f"frame 1 of {self.count}"
 
     def data(self) -> FrameData:
-        frame = self.frames[self.index]
-        contacts = frame["contacts"]
-        cell = np.where(np.array([b == "periodic" for b in frame["boundary"]]), frame["edges"], 0.0)
-        return FrameData(frame["position"], frame["radius"], frame["angle"], contacts["pair"].astype(np.int64),
-                         contacts["image"].astype(np.int64), contacts["status"], contacts["normal_force"],
-                         contacts["tangential_force"], contacts["surface_gap"], self.normals,
-                         self.wall_offsets[self.index], cell)
+        return FrameData.from_run_frame(self.frames[self.index], self.normals)
 
     def advance(self) -> None:
         self.index = (self.index + 1) % self.count

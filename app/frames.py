@@ -17,7 +17,7 @@ from engine.kernels.jit import KERNEL
 from engine.protocols.presets import pair_codes
 from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
-from .scene import SceneFrame
+from .drawing import SceneFrame
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,19 @@ class FrameData:
                    np.where(np.array(sim.periodic), sim.cell.length, 0.0))
 
 
+    @classmethod
+    def from_run_frame(cls, frame: dict, wall_normal: np.ndarray) -> "FrameData":
+        """What a frame needs from a run-file frame (:func:`engine.io.h5md.read_frame`), with the
+        walls' normals ``(W, 2)`` (from the file's parameters; the offsets are per frame)."""
+        contacts = frame["contacts"]
+        periodic = np.array([b == "periodic" for b in frame["boundary"]])
+        offsets = np.asarray(frame.get("wall_position", np.zeros(len(wall_normal))), dtype=float)
+        return cls(frame["position"], frame["radius"], frame["angle"], contacts["pair"].astype(np.int64),
+                   contacts["image"].astype(np.int64), contacts["status"], contacts["normal_force"],
+                   contacts["tangential_force"], contacts["surface_gap"], np.asarray(wall_normal, dtype=float),
+                   offsets, np.where(periodic, frame["edges"], 0.0))
+
+
 def _wall_segments(data: FrameData) -> np.ndarray:
     """Each wall's line clipped to the disks' bounding box, widened by two diameters."""
     if data.wall_offset.shape[0] == 0:
@@ -77,12 +90,17 @@ def _wall_segments(data: FrameData) -> np.ndarray:
     return np.array(segments, dtype=float).reshape(-1, 2, 2)
 
 
-def _rows_of(pair: np.ndarray, wanted) -> np.ndarray:
-    """Rows of the pair table ``pair`` that are among the pairs ``wanted``."""
+def _rows_of(pair: np.ndarray, wanted) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of the pair table ``pair`` that are among the pairs ``wanted``, and the position of
+    each one's pair in ``wanted``."""
     if not len(wanted) or not len(pair):
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     wanted = np.asarray(wanted, dtype=np.int64).reshape(-1, 2)
-    return np.flatnonzero(np.isin(pair_codes(pair[:, 0], pair[:, 1]), pair_codes(wanted[:, 0], wanted[:, 1])))
+    codes = pair_codes(pair[:, 0], pair[:, 1])
+    wanted_codes = pair_codes(wanted[:, 0], wanted[:, 1])
+    rows = np.flatnonzero(np.isin(codes, wanted_codes))
+    order = np.argsort(wanted_codes, kind="stable")
+    return rows, order[np.searchsorted(wanted_codes, codes[rows], sorter=order)]
 
 
 def _f64(a) -> np.ndarray:
@@ -111,7 +129,7 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
     segments = np.empty((m_total, 2, 2))
     force = np.empty(m_total)
     kind = np.empty(m_total, dtype=np.int8)
-    positions, walls, watched_segments = [], [], []
+    positions, walls, watched_segments, watched_index = [], [], [], []
     cell = None
     n0 = m0 = 0
     for (data, offset), pairs in zip(parts, watched):
@@ -123,7 +141,9 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                        sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m], kind[m0:m0 + m])
         positions.append(data.positions + shift)
         walls.append(_wall_segments(data) + shift)
-        watched_segments.append(segments[m0 + _rows_of(data.pair, pairs)])
+        rows, index = _rows_of(data.pair, pairs)
+        watched_segments.append(segments[m0 + rows])
+        watched_index.append(index)
         if data.cell.any() and len(parts) == 1:
             cell = (float(data.cell[0]), float(data.cell[1]))
         n0, m0 = n0 + n, m0 + m
@@ -131,7 +151,8 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                       angles=np.concatenate([d.angles for d, _ in parts]), coordination=coordination,
                       pressure=pressure, sliding=sliding, contacts=segments, contact_force=force,
                       contact_kind=kind, walls=np.concatenate(walls).reshape(-1, 2, 2), cell=cell,
-                      watched=np.concatenate(watched_segments).reshape(-1, 2, 2))
+                      watched=np.concatenate(watched_segments).reshape(-1, 2, 2),
+                      watched_index=np.concatenate(watched_index).astype(np.int64))
 
 
 @numba.njit(**KERNEL)

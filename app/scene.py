@@ -29,14 +29,15 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from dataclasses import dataclass
 from time import monotonic
 from typing import Callable
 
 import numpy as np
 import viser
 
-COLOR_FIELDS = ("rotation", "coordination", "pressure", "sliding")
+from .drawing import (CELL_COLOR, COLOR_FIELDS, COMPRESSIVE_COLOR, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR,
+                      PALETTES, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, SceneFrame, cell_outline, color_index,
+                      force_class_thickness, force_classes, frame_bounds)
 
 DISK_SEGMENTS = 16
 """Sides of the polygon standing for a disk: 60 triangles a disk (caps and
@@ -45,48 +46,12 @@ side), 336 000 for 5600 disks, kept low for software-rendered WebGL."""
 DISK_HEIGHT = 0.2
 """Cylinder height as a fraction of the frame's mean radius."""
 
-FORCE_CLASSES = 5
-"""Width classes of the force network: class k holds k/K <= |F|/max|F| < (k+1)/K
-(and the largest force, in class K - 1)."""
-
-MAX_FORCE_THICKNESS = 0.7
-"""Thickness of the strongest class, as a fraction of the mean radius; class k
-is (k + 1)/K of it."""
-
 SPOKE_THICKNESS = 0.08
-WATCHED_THICKNESS = 0.85
+WATCHED_THICKNESS = 0.45
 WALL_THICKNESS = 0.2
 CELL_THICKNESS = 0.1
 MECHANISM_THICKNESS = 0.25
 """Line thicknesses as fractions of the mean radius (world units)."""
-
-# Colours are sRGB as they should appear on screen; see srgb_to_linear for what
-# is sent where viser takes colour arrays.
-COMPRESSIVE_COLOR = (175, 25, 25)
-TENSILE_COLOR = (30, 90, 220)
-SLIDING_CONTACT_COLOR = (245, 160, 0)
-WATCHED_COLOR = (230, 0, 230)
-SPOKE_COLOR = (25, 25, 25)
-WALL_COLOR = (60, 60, 60)
-CELL_COLOR = (110, 110, 170)
-MECHANISM_COLOR = (0, 150, 60)
-
-COORDINATION_COLORS = np.array(
-    [
-        (200, 200, 200),  # 0 contacts: rattler
-        (250, 225, 120),  # 1
-        (250, 170, 80),  # 2
-        (225, 85, 60),  # 3
-        (160, 70, 160),  # 4
-        (70, 120, 200),  # 5
-        (60, 160, 90),  # 6 or more
-    ],
-    dtype=np.uint8,
-)
-"""Colour of a disk with z contacts, z = 0..6 (6 stands for 6 or more)."""
-
-SLIDING_DISK_COLORS = np.array([(170, 190, 215), (245, 140, 0)], dtype=np.uint8)
-"""Colour of a disk without (row 0) and with (row 1) a sliding contact."""
 
 ENVIRONMENT_INTENSITY = 0.3
 """Intensity of viser's environment map: at 1 (viser's default) the lit top
@@ -96,7 +61,6 @@ CAMERA_FOV = np.radians(30.0)
 """Vertical field of view of the initial camera (radians): narrow, so the
 perspective hardly distorts the 2D picture."""
 
-_LUT_SIZE = 256
 _ROOT = "/granlab"
 
 
@@ -113,77 +77,10 @@ def srgb_to_linear(colors: np.ndarray) -> np.ndarray:
     return np.round(255.0 * linear).astype(np.uint8)
 
 
-def _lookup_table(anchors: list[tuple[int, int, int]], cyclic: bool) -> np.ndarray:
-    """(256, 3) uint8 table interpolating the RGB anchors linearly (and back to
-    the first anchor if cyclic)."""
-    colors = np.asarray(anchors + anchors[:1] if cyclic else anchors, dtype=np.float64)
-    stops = np.linspace(0.0, 1.0, len(colors))
-    samples = np.arange(_LUT_SIZE) / (_LUT_SIZE if cyclic else _LUT_SIZE - 1)
-    table = np.stack([np.interp(samples, stops, colors[:, c]) for c in range(3)], axis=1)
-    return np.round(table).astype(np.uint8)
-
-
-ROTATION_LUT = _lookup_table(
-    [(225, 95, 95), (220, 190, 70), (95, 190, 105), (70, 180, 210), (105, 110, 220), (205, 95, 195)],
-    cyclic=True,
-)
-"""Cyclic map of theta: entry floor(256 theta / 2 pi) mod 256."""
-
-PRESSURE_LUT = _lookup_table(
-    [(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
-     (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37)],
-    cyclic=False,
-)
-"""Sequential map (viridis anchors) of p / max p: entry round(255 p / max p)."""
-
-_WIRE_TABLES = {
-    "rotation": srgb_to_linear(ROTATION_LUT),
-    "coordination": srgb_to_linear(COORDINATION_COLORS),
-    "pressure": srgb_to_linear(PRESSURE_LUT),
-    "sliding": srgb_to_linear(SLIDING_DISK_COLORS),
-    "contact kind": srgb_to_linear(np.array([COMPRESSIVE_COLOR, TENSILE_COLOR, SLIDING_CONTACT_COLOR])),
-}
-"""The palettes above as sent to viser (linear values)."""
-
-
-@dataclass(frozen=True)
-class SceneFrame:
-    """One picture of the simulation for the 3D scene (2D disks in the x-y plane).
-
-    N disks, M contacts, W walls, K watched contacts; lengths in simulation units.
-    """
-
-    positions: np.ndarray      # (N, 2) float64 disk centres
-    radii: np.ndarray          # (N,) float64
-    angles: np.ndarray         # (N,) float64 rotation angle theta of each disk (radians)
-    coordination: np.ndarray   # (N,) int number of contacts of each disk
-    pressure: np.ndarray       # (N,) float64 a per-disk pressure value (>= 0)
-    sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
-    contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
-    contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
-    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
-    walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
-    cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
-    watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
-
-    def __post_init__(self) -> None:
-        sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
-                 "M": np.shape(self.contacts)[0] if np.ndim(self.contacts) else 0}
-        expected = {
-            "positions": ("N", 2), "radii": ("N",), "angles": ("N",), "coordination": ("N",),
-            "pressure": ("N",), "sliding": ("N",), "contacts": ("M", 2, 2), "contact_force": ("M",),
-            "contact_kind": ("M",), "walls": ("W", 2, 2), "watched": ("K", 2, 2),
-        }
-        for name, shape in expected.items():
-            actual = np.shape(getattr(self, name))
-            wanted = tuple(sizes.get(d, a) if isinstance(d, str) else d for d, a in zip(shape, actual))
-            if actual != wanted or len(actual) != len(shape):
-                allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
-                raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
-                                 f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
-        if self.cell is not None and (len(self.cell) != 2 or not all(np.isfinite(self.cell))
-                                      or min(self.cell) < 0.0):
-            raise ValueError(f"SceneFrame.cell = {self.cell!r}; allowed: None or two finite lengths >= 0")
+_WIRE_TABLES = {field: srgb_to_linear(table) for field, table in PALETTES.items()}
+_WIRE_TABLES["contact kind"] = srgb_to_linear(np.array([color for _, color in CONTACT_KINDS]))
+_WIRE_TABLES["watched"] = srgb_to_linear(WATCHED_COLORS)
+"""The palettes of :mod:`app.drawing` as sent to viser (linear values)."""
 
 
 def unit_cylinder(segments: int = DISK_SEGMENTS) -> tuple[np.ndarray, np.ndarray]:
@@ -238,49 +135,12 @@ def pick_disk(ray_origin, ray_direction, positions: np.ndarray, radii: np.ndarra
     return k if relative[k] <= 1.0 else None
 
 
-def force_classes(contact_force: np.ndarray, classes: int = FORCE_CLASSES) -> np.ndarray:
-    """(M,) int class of each contact: min(K - 1, floor(K |F| / max|F|)), all 0
-    when every force is 0. Thickness grows with the class."""
-    top = float(contact_force.max()) if len(contact_force) else 0.0
-    if top <= 0.0:
-        return np.zeros(len(contact_force), dtype=np.intp)
-    return np.minimum((contact_force * (classes / top)).astype(np.intp), classes - 1)
-
-
-def force_class_thickness(klass: int, mean_radius: float) -> float:
-    """World thickness of force class k: (k + 1)/K x MAX_FORCE_THICKNESS x mean radius."""
-    return (klass + 1) / FORCE_CLASSES * MAX_FORCE_THICKNESS * mean_radius
-
-
-def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:
-    """(xmin, xmax, ymin, ymax) of the disks, walls and cell outline."""
-    xs = [frame.positions[:, 0] - frame.radii, frame.positions[:, 0] + frame.radii,
-          frame.walls[:, :, 0].ravel()]
-    ys = [frame.positions[:, 1] - frame.radii, frame.positions[:, 1] + frame.radii,
-          frame.walls[:, :, 1].ravel()]
-    if frame.cell is not None:
-        xs.append(np.array([0.0, frame.cell[0]]))
-        ys.append(np.array([0.0, frame.cell[1]]))
-    x = np.concatenate(xs)
-    y = np.concatenate(ys)
-    if len(x) == 0:
-        return (-1.0, 1.0, -1.0, 1.0)
-    return (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
-
-
 def _segments_3d(segments: np.ndarray, z: float) -> np.ndarray:
     """(S, 2, 2) planar segments -> (S, 2, 3) float32 at height z."""
     points = np.empty((len(segments), 2, 3), dtype=np.float32)
     points[:, :, :2] = segments
     points[:, :, 2] = z
     return points
-
-
-def _cell_outline(cell: tuple[float, float]) -> np.ndarray:
-    """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
-    lx, ly = cell
-    corners = np.array([(0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)])
-    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
 
 
 class SceneView:
@@ -323,7 +183,7 @@ class SceneView:
 
         self._spokes = lines("spokes", SPOKE_COLOR)
         self._forces = [lines(f"forces/class{k}", COMPRESSIVE_COLOR) for k in range(FORCE_CLASSES)]
-        self._watched = lines("watched", WATCHED_COLOR)
+        self._watched = lines("watched", tuple(WATCHED_COLORS[0]))
         self._walls = lines("walls", WALL_COLOR)
         self._cell = lines("cell", CELL_COLOR)
         self._mechanism = lines("mechanism", MECHANISM_COLOR)
@@ -417,10 +277,11 @@ class SceneView:
                     self._disks.batched_colors = self._colors
                 self._show(self._spokes, self._spoke_points, SPOKE_THICKNESS * mean_radius)
                 self._draw_forces(frame, 0.6 * height, mean_radius)
+                watched_colors = _WIRE_TABLES["watched"][frame.watched_index % len(WATCHED_COLORS)]
                 self._show(self._watched, _segments_3d(frame.watched, 0.8 * height),
-                           WATCHED_THICKNESS * mean_radius)
+                           WATCHED_THICKNESS * mean_radius, np.repeat(watched_colors[:, None, :], 2, axis=1))
                 self._show(self._walls, _segments_3d(frame.walls, 0.0), WALL_THICKNESS * mean_radius)
-                outline = _cell_outline(frame.cell) if frame.cell is not None else np.zeros((0, 2, 2))
+                outline = cell_outline(frame.cell) if frame.cell is not None else np.zeros((0, 2, 2))
                 self._show(self._cell, _segments_3d(outline, 0.0), CELL_THICKNESS * mean_radius)
             self.frames_pushed += 1
             now = monotonic()
@@ -448,24 +309,8 @@ class SceneView:
 
     def _fill_colors(self, frame: SceneFrame) -> None:
         """Disk colours (N, 3) uint8 of `color_field`, as sent (linear), into the colour buffer."""
-        index, scratch = self._lut_index, self._scratch
-        field = self._color_field
-        if field == "rotation":
-            np.multiply(frame.angles, _LUT_SIZE / (2.0 * np.pi), out=scratch)
-            np.floor(scratch, out=scratch)
-            np.mod(scratch, _LUT_SIZE, out=scratch)
-            index[:] = scratch
-        elif field == "coordination":
-            np.clip(frame.coordination, 0, len(COORDINATION_COLORS) - 1, out=index, casting="unsafe")
-        elif field == "pressure":
-            top = float(frame.pressure.max()) if len(frame.pressure) else 0.0
-            np.multiply(frame.pressure, (_LUT_SIZE - 1) / top if top > 0.0 else 0.0, out=scratch)
-            np.rint(scratch, out=scratch)
-            np.clip(scratch, 0, _LUT_SIZE - 1, out=scratch)
-            index[:] = scratch
-        else:
-            index[:] = frame.sliding
-        np.take(_WIRE_TABLES[field], index, axis=0, out=self._colors)
+        color_index(frame, self._color_field, self._lut_index, self._scratch)
+        np.take(_WIRE_TABLES[self._color_field], self._lut_index, axis=0, out=self._colors)
 
     def _fill_spokes(self, frame: SceneFrame, z: float) -> None:
         """Spokes (N, 2, 3): centre -> centre + r (cos theta, sin theta), at height z."""

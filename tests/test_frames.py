@@ -33,8 +33,11 @@ def test_fields_per_disk_and_per_contact():
     np.testing.assert_allclose(frame.contacts[1], [[2.0, 1.0], [4.0, 1.2]])
     np.testing.assert_allclose(frame.contacts[3], [[4.0, 1.2], [4.0, 0.0]])
     np.testing.assert_allclose(frame.contacts[4], [[0.0, 1.0], [0.0, 0.01]])
-    # the watched pairs, in table order
+    # the watched pairs, in table order, each with its place in the watch list (its colour)
     np.testing.assert_allclose(frame.watched, frame.contacts[[1, 4]])
+    assert frame.watched_index.tolist() == [0, 1]
+    reordered = build_frame([(data, (0.0, 0.0))], [[(0, 3), (1, 2)]])
+    assert reordered.watched_index.tolist() == [1, 0]
 
 
 def test_parts_side_by_side_are_shifted_and_watched_separately():

@@ -13,22 +13,21 @@ import pytest
 import viser
 from websockets.sync.client import connect
 
+import app.drawing as drawing
 import app.scene as scene
-from app.scene import (
+from app.drawing import (
     COLOR_FIELDS,
     COORDINATION_COLORS,
     FORCE_CLASSES,
     PRESSURE_LUT,
     ROTATION_LUT,
     SLIDING_DISK_COLORS,
+    WATCHED_COLORS,
     SceneFrame,
-    SceneView,
     force_class_thickness,
     force_classes,
-    pick_disk,
-    srgb_to_linear,
-    unit_cylinder,
 )
+from app.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
 
 
 def small_frame(n=4, cell=(6.0, 4.0)):
@@ -202,7 +201,7 @@ def test_force_network_handles_hold_each_contact_in_its_width_class(view):
     forces = view.handles["forces"]
     assert forces[0].visible is False  # empty class: hidden, not sent empty
     expected = {1: [0], 2: [1], 3: [2], 4: [3, 4]}
-    kind_colors = {0: scene.COMPRESSIVE_COLOR, 1: scene.TENSILE_COLOR, 2: scene.SLIDING_CONTACT_COLOR}
+    kind_colors = {0: drawing.COMPRESSIVE_COLOR, 1: drawing.TENSILE_COLOR, 2: drawing.SLIDING_CONTACT_COLOR}
     for k, contacts in expected.items():
         handle = forces[k]
         assert handle.visible
@@ -211,13 +210,16 @@ def test_force_network_handles_hold_each_contact_in_its_width_class(view):
             assert np.all(handle.colors[row] == srgb_to_linear(np.array(kind_colors[c % 3])))
     thickness = [forces[k].thickness for k in expected]
     assert np.all(np.diff(thickness) > 0.0)
-    assert forces[4].thickness == pytest.approx(scene.MAX_FORCE_THICKNESS * frame.radii.mean())
+    assert forces[4].thickness == pytest.approx(drawing.MAX_FORCE_THICKNESS * frame.radii.mean())
 
     watched = view.handles["watched"]
     assert watched.visible
     np.testing.assert_allclose(watched.points[:, :, :2], frame.watched, rtol=1e-6)
-    assert watched.thickness > forces[4].thickness
+    # a watched contact is a core of its own colour drawn over the force network, thinner than
+    # the strongest force, so it never looks like a sliding contact
     assert watched.points[0, 0, 2] > forces[4].points[0, 0, 2]
+    assert watched.thickness < forces[4].thickness
+    assert np.all(watched.colors[0] == srgb_to_linear(WATCHED_COLORS[0]))
 
 
 def test_walls_and_cell_outline(view):
@@ -231,7 +233,7 @@ def test_walls_and_cell_outline(view):
     assert walls.visible and cell.visible
 
     view.draw(SceneFrame(**{**frame.__dict__, "cell": None, "walls": np.zeros((0, 2, 2)),
-                            "watched": np.zeros((0, 2, 2))}))
+                            "watched": np.zeros((0, 2, 2)), "watched_index": None}))
     assert not walls.visible and not cell.visible and not view.handles["watched"].visible
 
 
@@ -239,7 +241,7 @@ def test_first_draw_frames_the_camera_looking_down(view):
     frame = small_frame()
     view.draw(frame)
     camera = view.server.initial_camera
-    xmin, xmax, ymin, ymax = scene.frame_bounds(frame)
+    xmin, xmax, ymin, ymax = drawing.frame_bounds(frame)
     assert (xmin, xmax, ymin, ymax) == (0.0, 6.0, 0.0, 4.0)  # the wall and the cell set the bounds
     np.testing.assert_allclose(camera.look_at, [3.0, 2.0, 0.0])
     np.testing.assert_allclose(camera.position[:2], [3.0, 2.0])

@@ -1,0 +1,216 @@
+"""What a picture of the lab shows and in which colours, shared by the live 3D scene
+(:mod:`app.scene`), the movies of ``granlab render`` (:mod:`app.render`) and the legends.
+
+A :class:`SceneFrame` holds one picture of the simulation: disks in the plane with their
+per-disk colour fields, the force network, walls, the periodic cell and the watched contacts.
+Colours are sRGB triples as they should appear on screen. Nothing here imports viser or
+matplotlib.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+
+COLOR_FIELDS = ("rotation", "coordination", "pressure", "sliding")
+
+FORCE_CLASSES = 5
+"""Width classes of the force network: class k holds k/K <= |F|/max|F| < (k+1)/K
+(and the largest force, in class K - 1)."""
+
+MAX_FORCE_THICKNESS = 0.7
+"""Thickness of the strongest class, as a fraction of the mean radius; class k
+is (k + 1)/K of it."""
+
+COMPRESSIVE_COLOR = (175, 25, 25)
+TENSILE_COLOR = (30, 90, 220)
+SLIDING_CONTACT_COLOR = (245, 160, 0)
+SPOKE_COLOR = (25, 25, 25)
+WALL_COLOR = (60, 60, 60)
+CELL_COLOR = (110, 110, 170)
+MECHANISM_COLOR = (0, 150, 60)
+CONTACT_KINDS = (("compressive", COMPRESSIVE_COLOR), ("tensile (cohesion)", TENSILE_COLOR),
+                 ("sliding", SLIDING_CONTACT_COLOR))
+"""Name and colour of each contact kind of :attr:`SceneFrame.contact_kind` (0, 1, 2)."""
+
+WATCHED_COLORS = np.array(
+    [(230, 0, 140), (0, 150, 80), (0, 150, 200), (120, 60, 190), (140, 90, 40), (150, 150, 0), (90, 90, 90),
+     (0, 90, 110)],
+    dtype=np.uint8,
+)
+"""Colour of the k-th watched contact (cycled): the same in the scene and in the Coulomb-cone
+plot, so a path on the plot can be found in the packing. None of them is a contact kind's."""
+
+STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("sliding, F_t = +μ(F_n+F0)", "#f59b00"),
+                 STATUS_SLIDE_NEG: ("sliding, F_t = −μ(F_n+F0)", "#b35a00"),
+                 STATUS_COHESIVE: ("attracted at a distance", "#1e5adc")}
+"""Name and colour of each contact status in the plots of watched contacts."""
+
+COORDINATION_COLORS = np.array(
+    [
+        (200, 200, 200),  # 0 contacts: rattler
+        (250, 225, 120),  # 1
+        (250, 170, 80),  # 2
+        (225, 85, 60),  # 3
+        (160, 70, 160),  # 4
+        (70, 120, 200),  # 5
+        (60, 160, 90),  # 6 or more
+    ],
+    dtype=np.uint8,
+)
+"""Colour of a disk with z contacts, z = 0..6 (6 stands for 6 or more)."""
+
+SLIDING_DISK_COLORS = np.array([(170, 190, 215), (245, 140, 0)], dtype=np.uint8)
+"""Colour of a disk without (row 0) and with (row 1) a sliding contact."""
+
+LUT_SIZE = 256
+
+
+def _lookup_table(anchors: list[tuple[int, int, int]], cyclic: bool) -> np.ndarray:
+    """(256, 3) uint8 table interpolating the RGB anchors linearly (and back to
+    the first anchor if cyclic)."""
+    colors = np.asarray(anchors + anchors[:1] if cyclic else anchors, dtype=np.float64)
+    stops = np.linspace(0.0, 1.0, len(colors))
+    samples = np.arange(LUT_SIZE) / (LUT_SIZE if cyclic else LUT_SIZE - 1)
+    table = np.stack([np.interp(samples, stops, colors[:, c]) for c in range(3)], axis=1)
+    return np.round(table).astype(np.uint8)
+
+
+ROTATION_LUT = _lookup_table(
+    [(225, 95, 95), (220, 190, 70), (95, 190, 105), (70, 180, 210), (105, 110, 220), (205, 95, 195)],
+    cyclic=True,
+)
+"""Cyclic map of theta: entry floor(256 theta / 2 pi) mod 256."""
+
+PRESSURE_LUT = _lookup_table(
+    [(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
+     (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37)],
+    cyclic=False,
+)
+"""Sequential map (viridis anchors) of p / max p: entry round(255 p / max p)."""
+
+PALETTES = {"rotation": ROTATION_LUT, "coordination": COORDINATION_COLORS, "pressure": PRESSURE_LUT,
+            "sliding": SLIDING_DISK_COLORS}
+"""The table each colour field indexes (sRGB)."""
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """One picture of the simulation (2D disks in the x-y plane).
+
+    N disks, M contacts, W walls, K watched contacts; lengths in simulation units.
+    """
+
+    positions: np.ndarray      # (N, 2) float64 disk centres
+    radii: np.ndarray          # (N,) float64
+    angles: np.ndarray         # (N,) float64 rotation angle theta of each disk (radians)
+    coordination: np.ndarray   # (N,) int number of contacts of each disk
+    pressure: np.ndarray       # (N,) float64 a per-disk pressure value (>= 0)
+    sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
+    contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
+    contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
+    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
+    walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
+    cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
+    watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
+    watched_index: np.ndarray | None = None  # (K,) int: position of each watched segment's pair in
+    #                                           the watch list (its colour); None: 0, 1, 2, ...
+
+    def __post_init__(self) -> None:
+        sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
+                 "M": np.shape(self.contacts)[0] if np.ndim(self.contacts) else 0}
+        expected = {
+            "positions": ("N", 2), "radii": ("N",), "angles": ("N",), "coordination": ("N",),
+            "pressure": ("N",), "sliding": ("N",), "contacts": ("M", 2, 2), "contact_force": ("M",),
+            "contact_kind": ("M",), "walls": ("W", 2, 2), "watched": ("K", 2, 2),
+        }
+        for name, shape in expected.items():
+            actual = np.shape(getattr(self, name))
+            wanted = tuple(sizes.get(d, a) if isinstance(d, str) else d for d, a in zip(shape, actual))
+            if actual != wanted or len(actual) != len(shape):
+                allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
+                raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
+                                 f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
+        if self.watched_index is None:
+            object.__setattr__(self, "watched_index", np.arange(len(self.watched)))
+        elif np.shape(self.watched_index) != (len(self.watched),):
+            raise ValueError(f"SceneFrame.watched_index has shape {np.shape(self.watched_index)}; allowed: "
+                             f"({len(self.watched)},), one index per watched segment")
+        if self.cell is not None and (len(self.cell) != 2 or not all(np.isfinite(self.cell))
+                                      or min(self.cell) < 0.0):
+            raise ValueError(f"SceneFrame.cell = {self.cell!r}; allowed: None or two finite lengths >= 0")
+
+
+def color_index(frame: SceneFrame, field: str, index: np.ndarray, scratch: np.ndarray) -> None:
+    """Rows of ``PALETTES[field]`` for each disk of ``frame`` into ``index`` (N,) intp, using
+    ``scratch`` (N,) float64 (both preallocated: a lab-sized frame is coloured without allocating)."""
+    if field == "rotation":
+        np.multiply(frame.angles, LUT_SIZE / (2.0 * np.pi), out=scratch)
+        np.floor(scratch, out=scratch)
+        np.mod(scratch, LUT_SIZE, out=scratch)
+        index[:] = scratch
+    elif field == "coordination":
+        np.clip(frame.coordination, 0, len(COORDINATION_COLORS) - 1, out=index, casting="unsafe")
+    elif field == "pressure":
+        top = float(frame.pressure.max()) if len(frame.pressure) else 0.0
+        np.multiply(frame.pressure, (LUT_SIZE - 1) / top if top > 0.0 else 0.0, out=scratch)
+        np.rint(scratch, out=scratch)
+        np.clip(scratch, 0, LUT_SIZE - 1, out=scratch)
+        index[:] = scratch
+    elif field == "sliding":
+        index[:] = frame.sliding
+    else:
+        raise ValueError(f"color_field {field!r} is not allowed: one of {', '.join(COLOR_FIELDS)}")
+
+
+def disk_colors(frame: SceneFrame, field: str) -> np.ndarray:
+    """(N, 3) uint8 sRGB colour of each disk for ``field``."""
+    n = len(frame.radii)
+    index = np.zeros(n, dtype=np.intp)
+    color_index(frame, field, index, np.zeros(n))
+    return PALETTES[field][index]
+
+
+def force_classes(contact_force: np.ndarray, classes: int = FORCE_CLASSES) -> np.ndarray:
+    """(M,) int class of each contact: min(K - 1, floor(K |F| / max|F|)), all 0
+    when every force is 0. Thickness grows with the class."""
+    top = float(contact_force.max()) if len(contact_force) else 0.0
+    if top <= 0.0:
+        return np.zeros(len(contact_force), dtype=np.intp)
+    return np.minimum((contact_force * (classes / top)).astype(np.intp), classes - 1)
+
+
+def force_class_thickness(klass: int, mean_radius: float) -> float:
+    """World thickness of force class k: (k + 1)/K x MAX_FORCE_THICKNESS x mean radius."""
+    return (klass + 1) / FORCE_CLASSES * MAX_FORCE_THICKNESS * mean_radius
+
+
+def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:
+    """(xmin, xmax, ymin, ymax) of the disks, walls and cell outline."""
+    xs = [frame.positions[:, 0] - frame.radii, frame.positions[:, 0] + frame.radii,
+          frame.walls[:, :, 0].ravel()]
+    ys = [frame.positions[:, 1] - frame.radii, frame.positions[:, 1] + frame.radii,
+          frame.walls[:, :, 1].ravel()]
+    if frame.cell is not None:
+        xs.append(np.array([0.0, frame.cell[0]]))
+        ys.append(np.array([0.0, frame.cell[1]]))
+    x = np.concatenate(xs)
+    y = np.concatenate(ys)
+    if len(x) == 0:
+        return (-1.0, 1.0, -1.0, 1.0)
+    return (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
+
+
+def cell_outline(cell: tuple[float, float]) -> np.ndarray:
+    """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
+    lx, ly = cell
+    corners = np.array([(0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)])
+    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+
+
+def hex_color(rgb) -> str:
+    """``#rrggbb`` of an sRGB triple."""
+    return "#{:02x}{:02x}{:02x}".format(*(int(c) for c in rgb))
