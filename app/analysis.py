@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from html import escape
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,13 +70,16 @@ class AnalysisRunner:
 
 
 def summary(result: AnalysisResult) -> str:
-    """Markdown lines: the values of the report and its time."""
+    """HTML: what was analysed and how long it took, then a table of the report's rows (label,
+    value, and why a value is missing)."""
     if result.error:
-        return f"**{result.kind}**: {result.error}"
-    lines = [f"**{result.kind}** of {result.state.source} (t = {result.state.time:.4g}), "
-             f"{result.report.timings['total']:.2f} s"]
-    lines += [f"- {key}: {text}" for key, text in result.report.lines()]
-    return "\n".join(lines)
+        return f"<p><b>{escape(result.kind)}</b>: {escape(result.error)}</p>"
+    head = (f"<p><b>{escape(result.kind)}</b> of {escape(result.state.source)} at t = {result.state.time:.4g} "
+            f"({result.state.disks} disks), {result.report.timings['total']:.2f} s</p>")
+    rows = "".join(f"<tr><td style='padding:2px 10px 2px 0'>{escape(row.label)}</td><td><b>{escape(row.text)}</b>"
+                   + (f" <span style='color:#666'>({escape(row.note)})</span>" if row.note else "") + "</td></tr>"
+                   for row in result.report.rows())
+    return head + f"<table style='font-size:13px;border-collapse:collapse'>{rows}</table>"
 
 
 def network_segments(result: AnalysisResult) -> dict:

@@ -317,14 +317,15 @@ def _analyze(args) -> dict:
     return result
 
 
-def _print_analysis(result: dict) -> None:
-    from .analysis.report import describe
-
+def _print_analysis(result) -> None:
+    """The rows of the report (:meth:`engine.analysis.report.AnalysisReport.rows`) that ``result``
+    (a :class:`engine.analysis.report.ReportDict`) keeps: "label: text  (note)", the texts aligned."""
     print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
           + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
-    for key, value in result.items():
-        if key not in ("analysis", "source", "particles", "forces_known", "run_file", "timings_s"):
-            print(f"  {key}: {describe(key, value)}")
+    rows = result.report.rows()
+    width = max((len(row.label) for row in rows), default=0) + 1
+    for row in rows:
+        print(f"  {row.label + ':':<{width}} {row.text}" + (f"  ({row.note})" if row.note else ""))
     print("  time: " + ", ".join(f"{k} {v:.3g} s" for k, v in result["timings_s"].items()))
 
 

@@ -25,6 +25,7 @@ of cells ``dx × dy`` (Sec. V C: "of the order of a/100"); ``field[i, j]`` is th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -60,6 +61,14 @@ is then flat over the whole fitted range and its d_F describes no power law ther
 fits that way)."""
 NOT_FINITE_RESIDUAL = 1e3
 """Residual of log I put where Eq. 28 overflows during the fit, so that Levenberg-Marquardt steps back."""
+NO_POWER_LAW = ("no power-law range in I(k) to fit by Eq. 28: a dense or random packing, or too small a cell, "
+                "has none")
+TOO_FEW_WAVEVECTORS = "too few wavevectors below 2π/a for a fit of Eq. 28: the cell is too small"
+NO_FIT = "no fit of Eq. 28, see d_F"
+ELL_DROPS_OUT = "d_F ≈ 2: ℓ drops out of Eq. 28"
+HOLES_PERCOLATE = ("a hole wraps around the periodic cell: the holes percolate and ⟨R⟩_w is not defined "
+                   "(Gilabert Sec. V C)")
+NO_HOLES = "no holes: the disks cover the whole cell"
 
 
 class FitError(GranLabError, RuntimeError):
@@ -100,7 +109,8 @@ class FractalAnalysis:
     ``fit_range``: the ``k`` range of the fit; ``holes``: number of holes; ``mean_hole_radius_w``:
     ``<R>_w`` (Eq. 30), ``inf`` if a hole wraps around the periodic box (the holes percolate and
     ``<R>_w`` is not defined, Sec. V C), ``nan`` without holes; ``fit_error``: why the fit failed
-    (its values are then NaN), empty when it succeeded.
+    (its values are then NaN), empty when it succeeded; ``reasons``: for each value that is NaN or
+    inf, why, in a few words for people (not in :meth:`as_dict`).
     """
 
     d_F: float
@@ -119,9 +129,10 @@ class FractalAnalysis:
     holes: int
     mean_hole_radius_w: float
     fit_error: str = ""
+    reasons: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def as_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if k not in ("k", "intensity", "fitted")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("k", "intensity", "fitted", "reasons")}
 
 
 # ---------------------------------------------------------------------------------------- grid
@@ -460,21 +471,33 @@ def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None,
     phi = float(field.mean(dtype=np.float64))
     k, intensity = structure_factor(field, lengths)
     lap("structure factor")
+    reasons = {}
     try:
         fit, fit_error = fit_structure(k, intensity, phi, diameter=a), ""
-    except (FitError, ParameterError) as error:
+    except FitError as error:
+        fit, fit_error, reasons["d_F"] = None, str(error), NO_POWER_LAW
+    except ParameterError as error:
         fit, fit_error = None, str(error)
+        reasons["d_F"] = TOO_FEW_WAVEVECTORS if error.name == "k_range" else f"no fit of Eq. 28: {error}"
     lap("fit")
     sizes, radius = hole_radii(field, (dx, dy))
     lap("holes")
     values = dict(d_F=math.nan, d_F_error=math.nan, xi=math.nan, xi_error=math.nan, constant=math.nan,
                   ell=math.nan, fitted=np.full(k.shape, math.nan), fit_range=(math.nan, math.nan))
-    if fit is not None:
+    if fit is None:
+        reasons.update({key: NO_FIT for key in ("d_F_error", "xi", "xi_error", "constant", "ell", "fit_range")})
+    else:
         values = dict(d_F=fit.d_F, d_F_error=fit.d_F_error, xi=fit.xi, xi_error=fit.xi_error, constant=fit.constant,
                       ell=fit.ell, fitted=fit.model(k), fit_range=fit.fit_range)
+        if not math.isfinite(fit.ell):
+            reasons["ell"] = ELL_DROPS_OUT
+    if not sizes.size:
+        reasons["mean_hole_radius_w"] = NO_HOLES
+    elif np.isinf(radius).any():
+        reasons["mean_hole_radius_w"] = HOLES_PERCOLATE
     return FractalAnalysis(phi=phi, spacing=(dx, dy), shape=(nx, ny), k=k, intensity=intensity,
                            holes=int(sizes.size), mean_hole_radius_w=weighted_hole_radius(sizes, radius),
-                           fit_error=fit_error, **values)
+                           fit_error=fit_error, reasons=reasons, **values)
 
 
 # ---------------------------------------------------------------- a fractal of known dimension

@@ -19,6 +19,13 @@ RATTLER_FORCE_TOLERANCE = 1e-4
 (Gilabert Sec. III A)."""
 FORCE_BINS = 40
 THETA_BINS = 36
+NO_FORCES = "no contact forces in this state (contacts found from the geometry)"
+NO_BACKBONE = "every disk is a rattler: there is no backbone"
+NO_INTERACTIONS = "no disk–disk interactions (z Φ = 0)"
+NO_PERCOLATION = "the force-carrying contacts never percolate: none wraps around the cell or joins opposite walls"
+FORCE_VALUES = ("force_unit", "normal_force_histogram", "theta_histogram", "mean_normal_force", "pressure",
+                "rumpf_force", "rumpf_force_eq18", "percolation_force")
+"""The values of :class:`PackingStats` that need contact forces."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +45,9 @@ class PackingStats:
     distribution (Eq. 18), and ``percolation_force`` F_perc: the largest threshold such that the
     interactions with |F| >= F_perc percolate (wrap around a periodic axis or join two opposite
     walls). ``normal``, ``tangential`` are the (N, T) of every interaction, for the scatter of
-    Gilabert Fig. 14 with its lines T = ±sqrt(3) N (Eq. 20)."""
+    Gilabert Fig. 14 with its lines T = ±sqrt(3) N (Eq. 20). ``reasons``: for each value that is
+    None or made up (``z_star`` = 0 without a backbone), why, in a few words for people (not in
+    :meth:`as_dict`)."""
 
     phi: float
     z: float
@@ -58,9 +67,10 @@ class PackingStats:
     percolation_force: float | None = None
     normal: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     tangential: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    reasons: dict[str, str] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if k not in ("normal", "tangential")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("normal", "tangential", "reasons")}
 
 
 def solid_fraction(state, area: float | None = None) -> float:
@@ -101,9 +111,14 @@ def packing_stats(state, force_scale_value: float | None = None, area: float | N
     stats = dict(phi=phi, z=z, z_star=2.0 * contacts / backbone if backbone else 0.0, rattlers=rattlers,
                  contacts=contacts, particles=n, coordination=(np.bincount(per_disk) / n).tolist(),
                  forces_known=forces_known)
+    reasons = {} if backbone else {"z_star": NO_BACKBONE}
     if forces_known:
-        stats.update(_force_statistics(state, phi, scale))
-    return PackingStats(**stats)
+        forces, force_reasons = _force_statistics(state, phi, scale)
+        stats.update(forces)
+        reasons.update(force_reasons)
+    else:
+        reasons.update(dict.fromkeys(FORCE_VALUES, NO_FORCES))
+    return PackingStats(**stats, reasons=reasons)
 
 
 def _histogram(values: np.ndarray, bins, value_range) -> tuple[list[float], list[float]]:
@@ -111,7 +126,8 @@ def _histogram(values: np.ndarray, bins, value_range) -> tuple[list[float], list
     return edges.tolist(), (counts / max(1, len(values))).tolist()
 
 
-def _force_statistics(state, phi: float, scale: float) -> dict:
+def _force_statistics(state, phi: float, scale: float) -> tuple[dict, dict]:
+    """The values of ``FORCE_VALUES`` and ``normal``, ``tangential``; and the reasons of those that are None."""
     n = state.positions.shape[0]
     c = state.contacts
     interacting = (c.status != STATUS_NONE) & (c.j < n)
@@ -127,15 +143,17 @@ def _force_statistics(state, phi: float, scale: float) -> dict:
     z = 2.0 * count / n
     diameters = 2.0 * np.asarray(state.radii)
     denominator = z * phi
+    percolation = percolation_force(state, np.hypot(c.normal_force, c.tangential_force), c.status != STATUS_NONE)
+    reasons = {} if denominator > 0 else dict.fromkeys(("rumpf_force", "rumpf_force_eq18"), NO_INTERACTIONS)
+    if percolation is None:
+        reasons["percolation_force"] = NO_PERCOLATION
     return dict(
         force_unit=unit, normal_force_histogram=_histogram(scaled, FORCE_BINS, (low, max(high, low + 1e-12))),
         theta_histogram=_histogram(theta, THETA_BINS, (0.0, 180.0)), mean_normal_force=mean, pressure=p,
         rumpf_force=float(np.pi * np.mean(diameters ** 2) / np.mean(diameters) * p / denominator)
         if denominator > 0 else None,
         rumpf_force_eq18=float(7.0 * np.pi * diameters.max() / 9.0 * p / denominator) if denominator > 0 else None,
-        percolation_force=percolation_force(state, np.hypot(c.normal_force, c.tangential_force),
-                                            c.status != STATUS_NONE),
-        normal=normal, tangential=tangential)
+        percolation_force=percolation, normal=normal, tangential=tangential), reasons
 
 
 def percolation_force(state, force: np.ndarray, usable: np.ndarray) -> float | None:
