@@ -1,5 +1,6 @@
-"""The ``granlab`` command: the engine's commands (:mod:`engine.cli`), ``serve`` (the lab) and
-``bench --lab`` (the lab's benchmark)."""
+"""The ``granlab`` command: the engine's commands (:mod:`engine.cli`), ``serve`` (the lab),
+``render`` (pictures and movies of a run file, :mod:`app.render`) and ``bench --lab`` (the lab's
+benchmark)."""
 
 from __future__ import annotations
 
@@ -19,12 +20,40 @@ def build_parser():
     serve.add_argument("--preset", default="ratchet", help="preset shown first (default ratchet)")
     serve.add_argument("--particles", type=int, help="number of disks of the first preset (default: the preset's)")
     serve.add_argument("--seed", type=int, help="seed of the first preset (default 0)")
+    # Every render option is read as text and checked by app.render, so that a wrong value is
+    # one line naming the option and what is allowed (argparse would print its usage too).
+    render = commands.add_parser("render", help="pictures and movies of a run file for slides (.png, .gif, .mp4)")
+    render.add_argument("runfile", help="a GranLab run file")
+    render.add_argument("--out", required=True, metavar="FILE",
+                        help="FILE.png (one picture; one per frame, FILE_00012.png, for several), FILE.gif or FILE.mp4")
+    render.add_argument("--frames", metavar="A:B:S",
+                        help="a frame K or a range A:B:S, negative counting from the end; a range starting with "
+                             "'-' is written --frames=-10: (default: the last frame for .png, every frame for a movie)")
+    render.add_argument("--size", default="1280x720", metavar="WxH", help="picture size in pixels (default 1280x720)")
+    render.add_argument("--color", default="rotation", metavar="FIELD",
+                        help="disk colours: rotation, coordination, pressure or sliding (default rotation)")
+    render.add_argument("--no-forces", action="store_true", help="leave out the force network")
+    render.add_argument("--fps", default="10", metavar="F", help="frames per second of a movie (default 10)")
+    render.add_argument("--json", action="store_true", help="print one JSON object")
+    render.set_defaults(handler=_render, printer=_print_render)
     bench = commands.choices["bench"]
     bench.add_argument("--lab", action="store_true",
                        help="benchmark the lab instead: a served preset streaming to a headless Chromium tab")
     bench.add_argument("--seconds", type=float, default=20.0, help="length of each lab measurement (default 20 s)")
     bench.add_argument("--tabs", type=int, default=100, help="tabs opened and closed by the lab benchmark (default 100)")
     return parser
+
+
+def _render(args) -> dict:
+    from .render import render_run
+
+    return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps)
+
+
+def _print_render(result: dict) -> None:
+    from .render import print_summary
+
+    print_summary(result)
 
 
 def main(argv: list[str] | None = None) -> int:
