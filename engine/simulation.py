@@ -267,14 +267,22 @@ class Simulation:
         if cell is not None and "stress" in cell.control and not all(cell.periodic):
             raise ParameterError("cell.control", cell.control, "stress control with both axes periodic")
 
-    def _choose_dt(self, law: ContactLaw, dt: float | None) -> float:
+    def _bound(self, law: ContactLaw) -> float:
         p = self.particles
         dynamic = p.inv_mass > 0
         moving = dynamic if dynamic.any() else np.ones_like(dynamic)
-        bound = stability_bound(law, p.mass[moving], p.radius[moving], p.inertia[moving])
+        return stability_bound(law, p.mass[moving], p.radius[moving], p.inertia[moving])
+
+    def auto_dt(self, law: ContactLaw | None = None) -> float:
+        """The automatic time step for ``law`` (default: the current one): ``dt_safety`` times
+        the stability bound of these disks."""
+        return self.integration.dt_safety * self._bound(self.law if law is None else law)
+
+    def _choose_dt(self, law: ContactLaw, dt: float | None) -> float:
+        bound = self._bound(law)
         if dt is None:
             return self.integration.dt_safety * bound
-        if dt > bound and dynamic.any():
+        if dt > bound and np.any(self.particles.inv_mass > 0):
             raise ParameterError("dt", dt, f"a time step at most the stability bound {bound:.6g} "
                                            "(see engine.simulation.stability_bound)")
         return float(dt)

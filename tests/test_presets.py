@@ -1,6 +1,7 @@
 """The lab's presets, headless: each one carries out its figure of the papers step by step."""
 
 import copy
+import re
 import math
 
 import numpy as np
@@ -14,9 +15,7 @@ from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 def run_until(preset, predicate, steps=200, limit=400_000):
     done = 0
     while not predicate(preset):
-        preset.advance(steps)
-        preset.sample()
-        done += steps
+        done += preset.advance(steps)
         assert done < limit, f"{preset.name}: stage {preset.stage!r} after {done} steps"
 
 
@@ -24,18 +23,20 @@ def run_until(preset, predicate, steps=200, limit=400_000):
 def ratchet16():
     preset = make_preset("ratchet16")
     rows = {"contacts": [], "cycles": [], "time": []}
+    frames = []
+    preset.on_frame = lambda: frames.append(preset.sim.time)
 
     def two_cycles(p):
         for name, new in p.rows().items():
             rows[name] += new
         return p.stage == "cycling" and p._cycle >= 2
 
-    run_until(preset, two_cycles, steps=preset.settings.steps_per_frame)
-    return preset, rows
+    run_until(preset, two_cycles, steps=997)
+    return preset, rows, frames
 
 
 def test_ratchet16_watches_the_contacts_that_reach_the_coulomb_cone(ratchet16):
-    preset, rows = ratchet16
+    preset, rows, _ = ratchet16
     mu = preset.settings.friction
     assert len(preset.watch) == preset.watch_count
     # chosen during the first cycle: the first watched contact slid (|F_t| reached mu N^e)
@@ -48,7 +49,7 @@ def test_ratchet16_watches_the_contacts_that_reach_the_coulomb_cone(ratchet16):
 
 def assert_in_cone(contacts, mu, cohesion):
     """Watched paths (F_n, F_t) inside |F_t| <= mu (F_n + F0), on its edge while sliding."""
-    contact = np.array([row[2:] for row in contacts])
+    contact = np.array([row[3:] for row in contacts])
     assert contact.size
     normal, tangential, status = contact[:, 0] + cohesion, contact[:, 1], contact[:, 2]
     assert np.all(np.abs(tangential) <= mu * normal * (1 + 1e-9) + 1e-15)
@@ -62,19 +63,41 @@ def test_the_cone_of_watched_contacts_is_shifted_by_cohesion(ratchet16):
     preset.apply(cohesion_force=0.2, cohesion_range=1e-3)
     preset.rows()
     cycle = preset._cycle
-    run_until(preset, lambda p: p._cycle > cycle, steps=preset.settings.steps_per_frame)
+    run_until(preset, lambda p: p._cycle > cycle)
     assert_in_cone(preset.rows()["contacts"], preset.settings.friction, 0.2)
 
 
 def test_ratchet16_records_strain_and_load_of_eq1(ratchet16):
-    preset, rows = ratchet16
-    assert [row[0] for row in rows["cycles"]] == [0, 1, 2]
-    t, q = np.array([(row[0], row[1]) for row in rows["time"] if row[0] >= preset._start]).T
-    # ratcheting Eq. 1: q = amplitude * (1 - cos(2 pi (t - t0) / T))
+    preset, rows, _ = ratchet16
+    cycles = np.array(rows["cycles"])
+    assert cycles[:, 0].tolist() == [0, 1, 2]
     load = preset.load
-    expected = load.amplitude * (1 - np.cos(2 * math.pi * (t - preset._start) / load.period))
+    start = cycles[0, 2]
+    # every cycle lasts exactly one period: the time step is fitted to it
+    assert np.diff(cycles[:, 2]) == pytest.approx([load.period] * 2, rel=1e-12)
+    t, cycle, q = np.array([row[:3] for row in rows["time"] if row[0] >= start]).T
+    # ratcheting Eq. 1: q = amplitude * (1 - cos(2 pi (t - t0) / T))
+    expected = load.amplitude * (1 - np.cos(2 * math.pi * (t - start) / load.period))
     assert q == pytest.approx(expected, abs=1e-12)
     assert q.max() > 1.9 * load.amplitude
+    assert cycle.tolist() == np.floor((t - start) / load.period + 1e-9).clip(max=2).tolist()
+
+
+def test_series_are_sampled_in_simulated_time_whatever_the_step_count_asked(ratchet16):
+    """At least 200 samples of the time series per load cycle, one sample of a watched contact per
+    1 % of the load amplitude (2 pi * 50 per cycle), 10 frames: however many steps advance asks for."""
+    preset, rows, frames = ratchet16
+    start, period = rows["cycles"][0][2], preset.load.period
+    t = np.array([row[0] for row in rows["time"]])
+    first_cycle = (t >= start) & (t < start + period - 1e-9)
+    assert first_cycle.sum() == preset.samples_per_cycle == 200
+    assert np.diff(t[first_cycle]) == pytest.approx(period / 200, abs=preset.sim.dt)  # on the nearest step
+    # the watched contacts are chosen at the end of the first cycle: their paths in the second
+    paths = np.array([row[:3] for row in rows["contacts"] if start + period <= row[2] < start + 2 * period - 1e-9])
+    per_contact = [np.sum((paths[:, 0] == i) & (paths[:, 1] == j)) for i, j in set(map(tuple, paths[:, :2]))]
+    assert max(per_contact) == preset.path_samples_per_cycle >= 2 * math.pi * 50
+    frames = np.array(frames)
+    assert np.sum((frames >= start) & (frames < start + period - 1e-9)) == preset.frames_per_cycle
 
 
 def test_loading_controls_wait_for_the_next_cycle_and_law_controls_act_at_once():
@@ -108,11 +131,10 @@ def test_lab_settings_are_validated(changes, allowed):
 def test_closed_path_preset_shows_eq17_for_cundall_strack_only():
     preset = make_preset("closed-path")
     loop = 4 * preset.steps_per_side
-    preset.sample()
-    start = preset.rows()["springs"][0]
     preset.advance(loop)
-    preset.sample()
-    end = preset.rows()["springs"][0]
+    rows = preset.rows()["springs"]
+    start, end = rows[0], rows[-1]
+    assert len(rows) == preset.path_samples_per_cycle + 1 and end[0] == pytest.approx(loop * preset.dt)
     (d_a, _), (d_b, _) = preset._corners[0], preset._corners[1]
     # ratcheting Eq. 17: Delta D_t = a / (r_i + r_j), a the signed area enclosed
     predicted = 0.5 * preset.turn * (d_b ** 2 - d_a ** 2) / (2 * preset.radius)
@@ -126,7 +148,6 @@ def test_block_starts_sliding_only_when_the_load_reaches_mu_fn():
     preset = make_preset("block")
     while preset.sim.time < 1.2 * preset.settings.period:
         preset.advance(20)
-        preset.sample()
     t, ratio, normal, tangential, status, velocity = np.array(preset.rows()["block"]).T
     sliding = np.isin(status, (STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
     first = np.flatnonzero(sliding)[0]
@@ -142,12 +163,10 @@ def test_block_starts_sliding_only_when_the_load_reaches_mu_fn():
 
 def test_aggregation_keeps_the_cell_and_merges_clusters():
     preset = make_preset("aggregation", preset_settings("aggregation", particles=120))
-    preset.sample()
-    start = preset.rows()["time"][0]
     while preset.sim.time < 150:
         preset.advance(500)
-    preset.sample()
-    end = preset.rows()["time"][0]
+    rows = preset.rows()["time"]
+    start, end = rows[0], rows[-1]
     t, z, phi, count, kinetic = zip(start, end)
     assert phi[1] == pytest.approx(phi[0], rel=1e-12)
     assert count[0] > 100 and count[1] < count[0] / 4
@@ -157,7 +176,6 @@ def test_aggregation_keeps_the_cell_and_merges_clusters():
 def test_compression_preset_reaches_the_imposed_pressure():
     preset = make_preset("compression", preset_settings("compression", particles=100))
     run_until(preset, lambda p: p.stage == "equilibrated", steps=500)
-    preset.sample()
     t, z, phi, pressure, kinetic = preset.rows()["time"][-1]
     assert pressure == pytest.approx(preset.pressure, rel=0.02)
     assert 0.75 < phi < 0.86 and z > 3.0
@@ -185,7 +203,6 @@ def test_every_preset_runs_and_reports_its_series():
     for name, cls in PRESETS.items():
         preset = make_preset(name, preset_settings(name, particles=min(cls.defaults.get("particles", 256), 60)))
         preset.advance(5)
-        preset.sample()
         status = preset.status()
         assert status["preset"] == name and status["settings"]["particles"] >= 1
         assert set(preset.rows()) <= set(cls.series)
@@ -202,3 +219,54 @@ def test_pair_maximum_keeps_the_largest_value_of_each_pair():
             expected[(i, j)] = max(v, expected.get((i, j), -1.0))
     assert merged.as_dict() == expected
     assert merged.largest(3) == sorted(expected, key=expected.get, reverse=True)[:3]
+
+
+def test_a_stiffer_law_shortens_the_time_step_and_the_cycle_still_lasts_one_period():
+    """The lab's time step is never pinned by the user: a rolling stiffness that needs a shorter
+    step gets it (mid-cycle), and the cycle still ends exactly one period after it began."""
+    preset = make_preset("ratchet16")
+    run_until(preset, lambda p: p.stage == "cycling")
+    preset.advance(997)
+    before = preset.sim.dt
+    notes = preset.apply(rolling_stiffness=50.0, rolling_friction=0.01)
+    assert preset.sim.law.rolling_stiffness == 50.0 and preset.sim.dt < before / 5
+    assert preset.sim.dt <= preset.sim.auto_dt() * (1 + 1e-12)
+    assert any("time step now" in note for note in notes)
+    run_until(preset, lambda p: p._cycle >= 2)
+    cycles = np.array(preset.rows()["cycles"])
+    assert np.diff(cycles[:, 2]) == pytest.approx([preset.load.period] * 2, rel=1e-9)
+
+
+@pytest.mark.parametrize("changes, allowed", [
+    ({"amplitude": 3.0}, "an amplitude from 0 to 2 P0 = 2 (P0 = 1)"),
+    ({"amplitude": -0.5}, "an amplitude from 0 to 2 P0 = 2"),
+    ({"pressure": 0.05}, "at least Δσ/2 = 0.1"),
+    ({"period": 0.0}, "a period of at least 100 time steps: T >= 0.07"),
+])
+def test_a_refused_control_names_what_is_allowed_given_the_other_settings(changes, allowed):
+    preset = make_preset("ratchet16")
+    before = preset.settings
+    with pytest.raises(ParameterError, match=re.escape(allowed)):
+        preset.apply(**changes)
+    assert preset.settings == before
+
+
+def test_rolling_friction_without_a_rolling_spring_says_so():
+    preset = make_preset("ratchet16")
+    notes = preset.apply(rolling_friction=0.01)
+    assert preset.settings.rolling_friction == 0.01
+    assert any("Set Kr > 0" in note for note in notes)
+
+
+def test_watching_a_pair_checks_that_it_can_exist():
+    preset = make_preset("ratchet16")
+    run_until(preset, lambda p: p.stage == "cycling")
+    with pytest.raises(ParameterError, match="two different disks 0 to 15, walls 16 to 19 "
+                                             r"\(left, right, bottom, top\)"):
+        preset.toggle_watch((3, 99))
+    with pytest.raises(ParameterError, match="two different disks"):
+        preset.toggle_watch((3, 3))
+    i, j = (int(k) for k in mobilisation(preset.sim)[0][0])
+    assert preset.toggle_watch((j, i)) == f"contact {i}–{j}: watched"  # either order names the pair
+    assert (i, j) in preset.watch
+    assert "not touching now" in preset.toggle_watch((0, 15 if (0, 15) != (i, j) else 14))

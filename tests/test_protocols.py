@@ -9,7 +9,7 @@ from engine import ContactLaw, ParameterError, ParticleState, PeriodicCell, Simu
 from engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
 from engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
 from engine.protocols.equilibrium import equilibrium, measured_pressure
-from engine.protocols.prepare import _gas, cell_mass, clusters, compress, gilabert_law, method1, method2
+from engine.protocols.prepare import gilabert_gas, cell_mass, clusters, compress, gilabert_law, method1, method2
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,7 @@ def test_method1_reaches_equilibrium_under_stress_control(cohesion, rolling):
 
 def test_cell_mass_is_gilabert_s_and_borrows_the_size_of_a_larger_sample():
     # Gilabert Sec. II A: M = 3/10 of the grain mass over L; the engine's default cell mass is the same
-    r, positions, length = _gas(50, 0.36, 3, 1.0)
+    r, positions, length = gilabert_gas(50, 0.36, 3, 1.0)
     sim = Simulation(ParticleState(positions, r, density=4.0 / np.pi), gilabert_law(),
                      cell=PeriodicCell((length, length)))
     assert cell_mass(r, length) == pytest.approx(sim.cell.mass[0], rel=1e-12)

@@ -10,6 +10,7 @@ Layout (``docs/run-files.md`` describes every dataset)::
     /observables/{energy, walls, stress}   time series at the frames
     /observables/cycles           one record per loading cycle
     /observables/contact_paths    (F_n, F_t, status) of watched contacts
+    /observables/lab              the lab's time series (one dataset per series) and its settings per frame
     /parameters                   every parameter (attributes, JSON) and the scene text
     /checkpoint                   two slots of the full state; /checkpoint/valid names the good one
 
@@ -48,7 +49,7 @@ PARTICLE_ELEMENTS = (("position", (2,)), ("velocity", (2,)), ("angle", ()), ("om
 
 FRAME_OBSERVABLES = (("wall_position", "observables/walls/position"), ("wall_force", "observables/walls/force"),
                      ("wall_mode", "observables/walls/mode"), ("stress", "observables/stress"),
-                     ("law_json", "observables/law"))
+                     ("law_json", "observables/law"), ("lab_settings_json", "observables/lab/settings"))
 """Per-frame observables that :func:`read_frame` returns with the particles (key, path)."""
 
 
@@ -116,11 +117,14 @@ class RunWriter:
 
     ``scene`` is the scene text (TOML), ``protocol`` a JSON-able description of what was run,
     ``watch`` pairs ``(i, j)`` (``j >= N``: a wall) whose (F_n, F_t, status) are recorded by
-    :meth:`write_contact_sample`. Use as a context manager.
+    :meth:`write_contact_sample`. ``lab_series`` (name -> column names) makes the file a lab run:
+    it holds those series (:meth:`write_series`) and the lab's settings at each frame
+    (``settings`` of :meth:`write_frame`). Use as a context manager.
     """
 
     def __init__(self, path: str | Path, sim: Simulation, scene: str = "", protocol: dict | None = None,
-                 watch: list[tuple[int, int]] | None = None, author: str = "GranLab user"):
+                 watch: list[tuple[int, int]] | None = None, author: str = "GranLab user",
+                 lab_series: dict[str, tuple[str, ...]] | None = None):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         n = sim.particles.count
@@ -170,6 +174,12 @@ class RunWriter:
                             ("tangential_force", np.float64), ("status", np.int8)):
             paths.create_dataset(name, shape=(0, n_watch), maxshape=(None, None), dtype=dtype,
                                  chunks=(256, max(1, n_watch)))
+        if lab_series is not None:
+            lab = observables.create_group("lab")
+            _time_dependent(lab, "settings", (), h5py.string_dtype())
+            for name, columns in lab_series.items():
+                _extendable(lab, name, (len(columns),), np.float64, 1024).attrs["columns"] = \
+                    np.array(columns, dtype="S32")
         self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
         self._create_checkpoint(f.create_group("checkpoint"), sim)
         f.swmr_mode = True
@@ -221,9 +231,10 @@ class RunWriter:
         _append(self._get(f"{path}/time"), time)
         _append(self._get(f"{path}/step"), step)
 
-    def write_frame(self, state) -> None:
+    def write_frame(self, state, settings: str | None = None) -> None:
         """Append a frame (positions, contacts, observables) from a :class:`Simulation` or a
-        :class:`Snapshot` taken earlier, and the cycle records waiting in memory; flush."""
+        :class:`Snapshot` taken earlier, and the cycle records waiting in memory; flush.
+        ``settings``: the lab's settings at that frame (JSON), for a lab run."""
         self._write_cycles()
         snap = state.snapshot() if isinstance(state, Simulation) else state
         step, time = snap.step, snap.time
@@ -253,15 +264,31 @@ class RunWriter:
         self._element("observables/walls/mode", step, time, [WALL_MODES.index(m) for m in snap.wall_modes])
         self._element("observables/stress", step, time, snap.stress)
         self._element("observables/law", step, time, to_json(snap.law))
+        if settings is not None:
+            self._element("observables/lab/settings", step, time, settings)
         self.file.flush()
 
     def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:
         """Record a loading cycle (wall positions at the minimum of the load). Records wait in
         memory and are written with the next frame or checkpoint, on :meth:`close`, or every
         100 records."""
-        self._cycles.append((cycle, sim.step, sim.time, length_x, length_y, sim.walls.offset.copy()))
+        self.write_cycle_record(cycle, sim.step, sim.time, length_x, length_y, sim.walls.offset)
+
+    def write_cycle_record(self, cycle: int, step: int, time: float, length_x: float, length_y: float,
+                           wall_position) -> None:
+        """Record a loading cycle taken earlier (as :meth:`write_cycle`); ``wall_position`` (W,)."""
+        self._cycles.append((cycle, step, time, length_x, length_y, np.array(wall_position, dtype=float)))
         if len(self._cycles) >= 100:
             self._write_cycles()
+
+    def write_series(self, name: str, rows: np.ndarray) -> None:
+        """Append rows (R, C) to the lab series ``name``; flush."""
+        dataset = self._get(f"observables/lab/{name}")
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, dataset.shape[1])
+        n = dataset.shape[0]
+        dataset.resize((n + len(rows), dataset.shape[1]))
+        dataset[n:] = rows
+        self.file.flush()
 
     def _write_cycles(self) -> None:
         """Write the cycle records and contact samples waiting in memory; flush."""
@@ -402,6 +429,18 @@ def read_checkpoint(f: h5py.File) -> dict | None:
     state = {}
     group.visititems(lambda name, obj: state.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
     return state
+
+
+def lab_series(f: h5py.File) -> dict[str, tuple[tuple[str, ...], np.ndarray]]:
+    """The lab's time series of a lab run: name -> (column names, rows (R, C)); empty otherwise."""
+    if "observables/lab" not in f:
+        return {}
+    out = {}
+    for name, item in f["observables/lab"].items():
+        if isinstance(item, h5py.Dataset):
+            columns = tuple(c.decode() if isinstance(c, bytes) else str(c) for c in item.attrs["columns"])
+            out[name] = (columns, item[()])
+    return out
 
 
 def parameters(f: h5py.File) -> dict:

@@ -109,7 +109,9 @@ def gilabert_law(friction: float = 0.15, kappa: float = 1e5, cohesion: bool = Tr
                       rolling_damping_ratio=rolling_damping_ratio)
 
 
-def _gas(count, solid_fraction, seed, diameter):
+def gilabert_gas(count: int, solid_fraction: float, seed: int, diameter: float = 1.0):
+    """Gilabert's gas (Sec. III): radii of :func:`gilabert_radii` placed at random without overlap in a
+    periodic square cell at ``solid_fraction``; returns (radii, positions (N, 2), cell length)."""
     r = gilabert_radii(count, diameter, seed)
     fraction = positive("solid_fraction", solid_fraction)
     if fraction >= 0.55:
@@ -144,7 +146,7 @@ def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     generalized mass is that of a sample of ``cell_mass_disks`` disks (:func:`cell_mass`)."""
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
-    r, positions, length = _gas(count, solid_fraction, seed, diameter)
+    r, positions, length = gilabert_gas(count, solid_fraction, seed, diameter)
     cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(pressure, pressure),
                         mass=cell_mass(r, length, diameter, cell_mass_disks))
     sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi / diameter ** 2), law,
@@ -195,7 +197,7 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
     if law.cohesion_force <= 0:
         raise ParameterError("cohesion_force", law.cohesion_force, "a cohesive law (F0 > 0) for method 2")
-    r, positions, length = _gas(count, solid_fraction, seed, diameter)
+    r, positions, length = gilabert_gas(count, solid_fraction, seed, diameter)
     rng = np.random.default_rng(seed + 7)
     speed = math.sqrt(law.cohesion_force * law.cohesion_range) if speed is None else speed
     velocity = rng.normal(0.0, speed / math.sqrt(2.0), size=(count, 2))

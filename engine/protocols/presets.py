@@ -2,9 +2,15 @@
 
 A preset owns its simulation(s) and the protocol around them (compression then cyclic
 loading, a closed path carried over and over, a load ramp, aggregation then compression).
-The lab's engine thread calls :meth:`Preset.advance`, and a few times a second
-:meth:`Preset.sample` (which records the time series), then reads :meth:`Preset.rows`,
+The lab's engine thread calls :meth:`Preset.advance`, then reads :meth:`Preset.rows`,
 :meth:`Preset.views` and :meth:`Preset.watched`; controls reach it through :meth:`Preset.apply`.
+
+Everything a preset records is sampled in simulated time, never by how often someone asks:
+each preset has a clock unit (a load cycle, a loop of the closed path, Gilabert's T_0) that
+lasts :meth:`Preset.cycle_time`, and :meth:`Preset.advance` stops on its way at every sample
+time to record the time series (``samples_per_cycle`` per unit), the paths of watched
+contacts (``path_samples_per_cycle``) and, through ``on_frame``, the frames a replay keeps
+(``frames_per_cycle``). A fast preset therefore draws smooth paths however fast it runs.
 Nothing here imports a UI library: presets run headless in tests.
 """
 
@@ -14,24 +20,37 @@ import dataclasses
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
+from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
 from ..params import (TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, nonnegative,
                       positive)
 from ..simulation import Simulation
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState
-from .cyclic import CyclicLoad, apply_load, steps_per_cycle
+from .cyclic import CyclicLoad, apply_load
 from .equilibrium import equilibrium, measured_pressure
-from .prepare import _gas, biaxial_box, clusters, gilabert_law
+from .prepare import biaxial_box, clusters, gilabert_gas, gilabert_law
+
+TOUCHING = (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
+
+CONTROL_LABELS = {
+    "particles": "Disks N", "seed": "Seed", "pressure": "Pressure P0", "amplitude": "Amplitude Δσ",
+    "period": "Period T", "phase": "Loading phase φ", "friction": "Friction μ", "rolling_friction": "Rolling friction μr",
+    "rolling_stiffness": "Rolling stiffness Kr", "cohesion_force": "Cohesion F0", "cohesion_range": "Cohesion range D0",
+    "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
+}
+"""The name each control has on the lab's page."""
 
 
 @dataclass(frozen=True)
 class LabSettings:
     """Every control of the lab, validated. Angles in degrees; ``friction`` may be inf.
 
-    ``particles`` and ``seed`` take effect on reset; the others live.
+    ``particles`` and ``seed`` take effect on reset; the others live. ``speed`` is in clock
+    units of the preset (e.g. load cycles) per second of wall clock; inf runs as fast as possible.
     """
 
     particles: int = 256
@@ -47,19 +66,20 @@ class LabSettings:
     cohesion_range: float = 0.0
     tangential_model: str = "cundall-strack"
     damping_ratio: float = 0.3
-    steps_per_frame: int = 50
+    speed: float = 1.0
 
     def __post_init__(self):
-        for name in ("particles", "steps_per_frame"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 20000:
-                raise ParameterError(name, value, "a whole number from 1 to 20000")
+        if isinstance(self.particles, bool) or not isinstance(self.particles, (int, np.integer)) \
+                or not 1 <= self.particles <= 20000:
+            raise ParameterError("particles", self.particles, "a whole number from 1 to 20000")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ParameterError("seed", self.seed, "a whole number >= 0")
         positive("pressure", self.pressure)
         nonnegative("amplitude", self.amplitude)
         positive("period", self.period)
-        finite("phase", self.phase)
+        if not -180.0 <= finite("phase", self.phase) <= 180.0:
+            raise ParameterError("phase", self.phase, "an angle from -180 to 180 degrees")
+        positive("speed", self.speed, allow_inf=True)
         ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
                    rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
                    cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
@@ -87,8 +107,9 @@ class View:
 
 
 class Preset(ABC):
-    """Base of the presets. Subclasses set ``name``, ``title``, ``controls``, ``defaults`` and
-    ``series`` and implement ``_build`` and ``_advance``."""
+    """Base of the presets. Subclasses set ``name``, ``title``, ``controls``, ``defaults``,
+    ``series`` (and ``path_series``, ``key_plots``, the clock) and implement ``_build``,
+    ``_advance`` and ``sample``."""
 
     name = ""
     title = ""
@@ -98,27 +119,59 @@ class Preset(ABC):
     defaults: dict = {}
     #: observable series it publishes: name -> column names
     series: dict[str, tuple[str, ...]] = {}
+    #: the series sampled at the path cadence (paths drawn as lines: watched contacts, springs)
+    path_series: tuple[str, ...] = ()
+    #: the plots of the preset (the lab's names), and the two that show what it is about
+    plots: tuple[str, ...] = ()
+    key_plots: tuple[str, ...] = ()
+    #: what the speed control counts per second of wall clock; one lasts :meth:`cycle_time`
+    clock_unit = "load cycle"
+    #: the time axes' label (the preset's unit of time)
+    time_label = "t"
+    #: time-series samples per clock unit
+    samples_per_cycle = 200
+    #: path samples per clock unit: at least one per 1 % of the load amplitude (max |dq/dt| =
+    #: 2 pi Delta sigma / T, so 2 pi * 50 = 315 per period)
+    path_samples_per_cycle = 320
+    #: frames a replay keeps per clock unit
+    frames_per_cycle = 10
+    #: fewest and most disks the preset can use
+    particle_range = (1, 20000)
 
     def __init__(self, settings: LabSettings | None = None):
-        self.settings = settings if settings is not None else LabSettings().replace(**self.defaults)
+        settings = settings if settings is not None else LabSettings().replace(**self.defaults)
+        low, high = self.particle_range
+        if "particles" in self.controls and not low <= settings.particles <= high:
+            raise ParameterError("particles", settings.particles, f"{low} to {high} disks for the {self.name} preset")
+        self.settings = settings
         self.stage = ""
         self._rows = {name: [] for name in self.series}
         self.watch: list[tuple[int, int]] = []
         #: the preset chooses the watched contacts until the user does
         self.auto_watch = True
+        #: called (on the engine thread) at each frame time; the engine keeps the frame
+        self.on_frame: Callable[[], None] | None = None
         self._build()
+        self._restart_clock()
 
     @abstractmethod
     def _build(self) -> None:
         """Create the simulation(s) from ``self.settings``."""
 
     @abstractmethod
-    def _advance(self, steps: int) -> None:
-        """Run about ``steps`` steps of the protocol (emitting the rows of events, e.g. cycles)."""
+    def _advance(self, steps: int) -> int:
+        """Run at most ``steps`` steps of the protocol (at least one); returns the steps run."""
 
     @abstractmethod
     def sample(self) -> None:
         """Emit the rows of the time series for the current state."""
+
+    def sample_paths(self) -> None:
+        """Emit the rows of the path series for the current state."""
+
+    def cycle_time(self) -> float:
+        """Simulated time of one clock unit."""
+        return self.settings.period
 
     # -- the engine thread's interface
     @property
@@ -128,22 +181,100 @@ class Preset(ABC):
     def views(self) -> list[View]:
         return [View(self._sim)]
 
-    def advance(self, steps: int) -> None:
-        """Run about ``steps`` steps of the protocol (it may stop early at a stage's boundary)."""
+    def advance(self, steps: int) -> int:
+        """Run up to ``steps`` steps of the protocol, stopping on the way at every sample time
+        (recording the series) and frame time (calling ``on_frame``); returns the steps run."""
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
             raise ParameterError("steps", steps, "a whole number >= 1")
-        self._advance(int(steps))
+        done = 0
+        while done < steps:
+            done += self._advance(min(int(steps) - done, self.steps_to_next_sample()))
+            self._record_due()
+        return done
 
-    def apply(self, **changes) -> LabSettings:
-        """Change controls (validated first: on error nothing changes). Law controls act at once."""
+    def steps_to_next_sample(self) -> int:
+        """Steps to the next sample time (of a series, a path or a frame)."""
+        return self._steps_until(min(self._due.values()))
+
+    def _steps_until(self, time: float) -> int:
+        sim = self.sim
+        return max(1, math.ceil((time - sim.time) / sim.dt - 1e-6))
+
+    def _restart_clock(self) -> None:
+        """Sample, and take a frame, now; the next ones one interval later (a new stage or a new
+        period starts the sampling grid afresh)."""
+        now = self.sim.time
+        self._due = {"sample": now, "path": now, "frame": now}
+        self._record_due()
+
+    def _record_due(self) -> None:
+        now, tolerance = self.sim.time, 1e-6 * self.sim.dt
+        unit = self.cycle_time()
+        for key, per_cycle, record in (("sample", self.samples_per_cycle, self.sample),
+                                       ("path", self.path_samples_per_cycle, self._record_paths),
+                                       ("frame", self.frames_per_cycle, self._record_frame)):
+            if now >= self._due[key] - tolerance:
+                record()
+                interval = unit / per_cycle
+                self._due[key] = max(self._due[key] + interval, now + 0.5 * interval)
+
+    def _record_paths(self) -> None:
+        if self.path_series:
+            self.sample_paths()
+
+    def _record_frame(self) -> None:
+        if self.on_frame is not None:
+            self.on_frame()
+
+    def apply(self, **changes) -> list[str]:
+        """Change controls (validated first: on error nothing changes). Law controls act at once
+        (or wait for the stage that uses them). Returns notes for the user (e.g. the new time step)."""
+        values = {**dataclasses.asdict(self.settings), **changes}
+        for key, (holds, allowed) in self._rules(values).items():
+            if key in changes and not holds:
+                raise ParameterError(key, changes[key], allowed)
         settings = self.settings.replace(**changes)
         law_changes = {key: getattr(settings, key) for key in self._live_law_controls() if key in changes}
-        if law_changes:
-            for view in self.views():
-                view.sim.set_law(**law_changes)
+        notes = self._set_law(**law_changes) if law_changes else []
         self.settings = settings
         self._changed(changes)
-        return settings
+        if "rolling_friction" in changes and settings.rolling_friction > 0 and settings.rolling_stiffness == 0 \
+                and "rolling_stiffness" in self.controls:
+            notes.append("Rolling friction μr acts only through the rolling spring: with Kr = 0 there is no rolling "
+                         "moment. Set Kr > 0 (Gilabert: Kr = 1e-4 K_N a²).")
+        return notes
+
+    def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
+        """This preset's rules on its settings given the others (beyond LabSettings' own checks):
+        key -> (whether ``values`` keep it, what is allowed and what to change)."""
+        return {}
+
+    def _period_rule(self, values: dict) -> tuple[bool, str]:
+        dt = self.sim.dt
+        return (_real(values["period"]) >= 100 * dt,
+                f"a period of at least 100 time steps: T >= {100 * dt:.3g} (the time step {dt:.3g} follows the "
+                f"stiffness of the contacts)")
+
+    def _set_law(self, **changes) -> list[str]:
+        """Change the law of every view. The lab's time step is never the user's: when the new law
+        (a stiffness, a damping ratio, the cohesion) needs a shorter one, it takes the automatic
+        step, which :meth:`_fit_dt` may shorten to end a cycle on a step."""
+        before = self.sim.dt
+        for view in self.views():
+            sim = view.sim
+            if sim.dt > sim.auto_dt(sim.law.replace(**changes)):
+                sim.set_dt(None)
+            sim.set_law(**changes)
+        if self.sim.dt != before:
+            self._fit_dt()
+        after = self.sim.dt
+        if abs(after - before) > 1e-3 * before:
+            return [f"time step now {after:.3g} (stability bound of the new law; was {before:.3g}): "
+                    f"the simulation takes {before / after:.2g}× as many steps per unit of time"]
+        return []
+
+    def _fit_dt(self) -> None:
+        """Adjust the time step after a law change (hook: a cycle must end on a step)."""
 
     def _live_law_controls(self) -> tuple[str, ...]:
         """Law controls that act on the simulation now (others wait for a stage of the protocol)."""
@@ -164,50 +295,88 @@ class Preset(ABC):
     def watched(self) -> list[tuple[int, int]]:
         return list(self.watch)
 
-    def toggle_watch(self, pair: tuple[int, int]) -> None:
-        """Watch (or stop watching) the contact ``pair`` = (i, j), j >= N for a wall."""
-        pair = (int(pair[0]), int(pair[1]))
+    def toggle_watch(self, pair: tuple[int, int]) -> str:
+        """Watch (or stop watching) the contact ``pair`` = (i, j), ``j >= N`` for a wall; returns
+        what happened, for the user. A pair that cannot exist is refused."""
+        sim = self.views()[0].sim
+        pair = self._pair(sim, int(pair[0]), int(pair[1]))
         self.auto_watch = False
+        label = pair_label(pair, sim.particles.count, sim.walls.names)
         if pair in self.watch:
             self.watch.remove(pair)
-        else:
-            self.watch.append(pair)
+            return f"contact {label}: no longer watched"
+        self.watch.append(pair)
+        snap = sim.contact_snapshot()
+        if not np.any((snap.i == pair[0]) & (snap.j == pair[1])):
+            return f"contact {label}: watched; not touching now, its path starts when it touches"
+        return f"contact {label}: watched"
 
-    def watch_disk(self, index: int) -> None:
+    @staticmethod
+    def _pair(sim: Simulation, i: int, j: int) -> tuple[int, int]:
+        """The table's order of a pair: (min, max) for two disks, (disk, N + wall) for a wall."""
+        n, walls = sim.particles.count, sim.walls.count
+        wall_text = f", walls {n} to {n + walls - 1} ({', '.join(sim.walls.names)})" if walls else ""
+        allowed = f"two different disks 0 to {n - 1}{wall_text}"
+        if i == j or min(i, j) < 0 or max(i, j) >= n + walls or min(i, j) >= n:
+            raise ParameterError("watch contact", f"{i} {j}", allowed)
+        return (min(i, j), max(i, j))
+
+    def watch_disk(self, index: int) -> str:
         """Watch every contact of disk ``index`` of the first view (or stop, if one is watched)."""
-        snap = self.views()[0].sim.contact_snapshot()
+        sim = self.views()[0].sim
+        n = sim.particles.count
+        if not 0 <= index < n:
+            raise ParameterError("disk", index, f"a disk 0 to {n - 1}")
+        snap = sim.contact_snapshot()
         pairs = [(int(i), int(j)) for i, j in zip(snap.i, snap.j) if index in (i, j)]
         self.auto_watch = False
         if any(pair in self.watch for pair in pairs):
             self.watch = [pair for pair in self.watch if pair not in pairs]
-        else:
-            self.watch.extend(pairs)
+            return f"disk {index}: its contacts are no longer watched"
+        self.watch.extend(pairs)
+        return f"disk {index}: watching its {len(pairs)} contacts" if pairs else f"disk {index} touches nothing"
 
     def status(self) -> dict:
         return {"preset": self.name, "title": self.title, "stage": self.stage,
-                "settings": dataclasses.asdict(self.settings)}
+                "settings": dataclasses.asdict(self.settings), "clock_unit": self.clock_unit,
+                "cycle_time": self.cycle_time(), "readout": self.readout()}
+
+    def readout(self) -> dict:
+        """Figures for the lab's readout strip (those that mean something for the preset): solid
+        fraction, coordination, sliding contacts."""
+        sim = self.views()[0].sim
+        return {"phi": solid_fraction(sim), "z": coordination(sim), "sliding": sliding_contacts(sim)}
+
+
+def _real(value) -> float:
+    """``value`` as a float, NaN if it is not a number (a rule on it then fails)."""
+    return float(value) if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
+        else math.nan
+
+
+def pair_label(pair: tuple[int, int], disks: int, wall_names) -> str:
+    """``i–j`` of a watched pair (``i–top`` for a wall)."""
+    i, j = pair
+    return f"{i}–{j}" if j < disks else f"{i}–{wall_names[j - disks]}"
 
 
 def _contact_rows(sim: Simulation, pairs: list[tuple[int, int]]):
-    """(pair index, F_n, F_t, status) of the watched pairs present in ``sim``'s table, with
+    """(i, j, F_n, F_t, status) of the watched pairs present in ``sim``'s table, with
     ``F_n = N^e + N^a`` the normal force without its viscous part: ``N^e - F0`` in contact
     (Gilabert Eq. 4), the attraction alone at a distance. The Coulomb condition
     ``|F_t| <= mu N^e`` (Gilabert Eq. 8) is then the cone ``|F_t| <= mu (F_n + F0)``."""
     if not pairs:
         return []
     snap = sim.contact_snapshot()
-    n = sim.particles.count
     cohesion = sim.law.cohesion_force
-    ordered = [(min(i, j), max(i, j)) if j < n else (i, j) for i, j in pairs]
-    index = {pair: k for k, pair in enumerate(ordered)}
-    keys = np.array(ordered, dtype=np.int64)
+    keys = np.array(pairs, dtype=np.int64)
     out = []
     for k in np.flatnonzero(np.isin(pair_codes(snap.i, snap.j), pair_codes(keys[:, 0], keys[:, 1]))):
-        touching = snap.status[k] in (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
+        touching = snap.status[k] in TOUCHING
         normal = snap.elastic_normal_force[k] - cohesion if touching else snap.normal_force[k]
-        out.append((index[(int(snap.i[k]), int(snap.j[k]))], float(normal), float(snap.tangential_force[k]),
+        out.append((int(snap.i[k]), int(snap.j[k]), float(normal), float(snap.tangential_force[k]),
                     int(snap.status[k])))
-    return sorted(out)
+    return out
 
 
 def pair_codes(i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -219,7 +388,7 @@ def mobilisation(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (K, 2) and |F_t| / N^e (K,) of the touching contacts with N^e > 0 (the ratio
     reaches mu on the Coulomb cone)."""
     snap = sim.contact_snapshot()
-    touching = np.isin(snap.status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
+    touching = np.isin(snap.status, TOUCHING)
     keep = np.flatnonzero(touching & (snap.elastic_normal_force > 0))
     ratio = np.abs(snap.tangential_force[keep]) / snap.elastic_normal_force[keep]
     return np.column_stack([snap.i[keep], snap.j[keep]]), ratio
@@ -250,29 +419,59 @@ class PairMaximum:
         return [(int(c >> 32), int(c & 0xFFFFFFFF)) for c in self.codes[top]]
 
 
+def coordination(sim: Simulation) -> float:
+    """Mean number of touching disk-disk contacts per disk, 2 M / N."""
+    table = sim.contacts
+    rows = table.count
+    n = sim.particles.count
+    touching = np.isin(table.status[:rows], TOUCHING)
+    return 2.0 * int(np.count_nonzero(touching & (table.particle_j[:rows] < n))) / n
+
+
+def sliding_contacts(sim: Simulation) -> int:
+    """Contacts sliding now (on either side of the Coulomb cone)."""
+    status = sim.contacts.status[:sim.contacts.count]
+    return int(np.count_nonzero((status == STATUS_SLIDE_POS) | (status == STATUS_SLIDE_NEG)))
+
+
+def solid_fraction(sim: Simulation) -> float:
+    """Disk area over the area of the box or cell (:meth:`Simulation.box_lengths`)."""
+    lengths = sim.box_lengths()
+    return math.pi * float(np.sum(sim.particles.radius ** 2)) / float(lengths[0] * lengths[1])
+
+
 # ---------------------------------------------------------------------------------------------- ratchet
 class RatchetPreset(Preset):
     """A biaxial box compressed frictionless to P0, then cyclically loaded (ratcheting Eq. 1).
 
     Stages: ``compressing`` (until Gilabert's equilibrium or 200 tau), then ``cycling``. Loading
-    controls (P0, amplitude, period, phase) take effect at the next cycle start, where q = 0.
-    Series: ``time`` (t, q, gamma, kinetic, stored, dissipated, balance, z), ``cycles`` (cycle,
-    gamma at the start of the cycle), ``contacts`` (watched index, t, N^e, F_t, status).
+    controls (P0, amplitude, period, phase) take effect at the next cycle start, where q = 0;
+    each cycle lasts exactly T (the time step is fitted to it). Series: ``time`` (t, cycle, q,
+    gamma, energies, z; cycle -1 while compressing), ``cycles`` (cycle, gamma at the start of the
+    cycle, t, step, box lengths), ``contacts`` (i, j, t, F_n, F_t, status of the watched pairs).
     The watched contacts are the ``watch_count`` that came closest to the Coulomb cone during
-    the first cycle (the ones that slid, if any), until the user picks others.
+    the first cycle (the ones that slid, if any), until the user picks others. The strain per
+    cycle is fitted (:func:`engine.analysis.ratchet.ratchet_verdict`) from ``reference_cycle``
+    on: the first cycles settle the packing.
     """
 
     name = "ratchet"
     title = "Biaxial box under cyclic loading"
     controls = ("pressure", "amplitude", "period", "phase", "particles", "seed") + LAW_CONTROLS
-    defaults = {"particles": 256}
-    series = {"time": ("t", "q", "gamma", "kinetic", "stored", "dissipated", "balance", "z"),
-              "cycles": ("cycle", "gamma"),
-              "contacts": ("watch", "t", "normal", "tangential", "status")}
+    defaults = {"particles": 256, "speed": math.inf}
+    series = {"time": ("t", "cycle", "q", "gamma", "kinetic", "stored", "dissipated", "balance", "z"),
+              "cycles": ("cycle", "gamma", "t", "step", "length_x", "length_y"),
+              "contacts": ("i", "j", "t", "normal", "tangential", "status")}
+    path_series = ("contacts",)
+    plots = ("strain-per-cycle", "q-gamma", "coulomb-cone", "energy", "coordination")
+    key_plots = ("q-gamma", "strain-per-cycle")
+    time_label = "t (τ = √(ρL²/P))"
+    particle_range = (4, 20000)
     elliptic = False
     compression_limit = 200.0
     compression_ramp = 10.0
     watch_count = 4
+    reference_cycle = 2
 
     def _build(self) -> None:
         s = self.settings
@@ -293,11 +492,27 @@ class RatchetPreset(Preset):
         self._next_check = 1.0
         self._pending_load = None
         self._start = None
+        self._cycle_end = math.inf
+        self._cycle_gamma: list[tuple[int, float]] = []
+        self.verdict = None
+
+    def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
+        pressure, amplitude = _real(values["pressure"]), _real(values["amplitude"])
+        return {"amplitude": (0.0 <= amplitude <= 2.0 * pressure,
+                              f"an amplitude from 0 to 2 P0 = {2.0 * pressure:g} (P0 = {pressure:g}): the load must "
+                              f"not swing further than the box is pressed; raise P0 first to load harder"),
+                "pressure": (pressure > 0.0 and pressure >= 0.5 * amplitude,
+                             f"a pressure > 0 and at least Δσ/2 = {0.5 * amplitude:g} (Δσ = {amplitude:g}); lower "
+                             f"Δσ first to unload further"),
+                "period": self._period_rule(values)}
 
     def _load(self) -> CyclicLoad:
         s = self.settings
         phase = math.radians(s.phase) if (self.elliptic or s.phase != 0.0) else None
         return CyclicLoad(pressure=s.pressure, amplitude=s.amplitude, period=s.period, phase=phase)
+
+    def cycle_time(self) -> float:
+        return self.load.period if self.stage == "cycling" else self.settings.period
 
     def _live_law_controls(self) -> tuple[str, ...]:
         # the compression is frictionless: friction and rolling resistance wait for the cycling
@@ -308,11 +523,21 @@ class RatchetPreset(Preset):
         if any(key in changes for key in ("pressure", "amplitude", "period", "phase")) and self.stage == "cycling":
             self._pending_load = self._load()
 
+    def _fit_dt(self) -> None:
+        """End the current cycle on a step: the rest of it in whole steps no longer than the
+        stability allows (the next cycle starts from the automatic step again)."""
+        sim = self._sim
+        if self.stage != "cycling":
+            return
+        remaining = self._cycle_end - sim.time
+        if remaining > 0.5 * sim.dt:
+            sim.set_dt(remaining / math.ceil(remaining / sim.dt - 1e-9))
+
     def _lengths(self):
         lengths = self._sim.box_lengths()
         return float(lengths[0]), float(lengths[1])
 
-    def _advance(self, steps: int) -> None:
+    def _advance(self, steps: int) -> int:
         sim = self._sim
         if self.stage == "compressing":
             sim.run(steps)
@@ -324,38 +549,55 @@ class RatchetPreset(Preset):
                 self._next_check = sim.time + 1.0
                 if equilibrium(sim, self.settings.pressure).equilibrated or sim.time > self.compression_limit:
                     self._start_cycling()
-        else:
-            to_boundary = self._per_cycle - (sim.step - self._cycle_step) % self._per_cycle
-            sim.run(min(steps, to_boundary))
-            if self._cycle == 0 and self.auto_watch:
-                self.mobilised.add(*mobilisation(sim))
-            if (sim.step - self._cycle_step) % self._per_cycle == 0:
-                self._cycle_done()
+            return steps
+        steps = min(steps, max(1, round((self._cycle_end - sim.time) / sim.dt)))
+        sim.run(steps)
+        if self._cycle == 0 and self.auto_watch:
+            self.mobilised.add(*mobilisation(sim))
+        if sim.time >= self._cycle_end - 0.5 * sim.dt:
+            self._cycle_done()
+        return steps
 
     def _start_cycling(self) -> None:
         sim = self._sim
         sim.set_law(friction=self.settings.friction, rolling_friction=self.settings.rolling_friction,
                     rolling_stiffness=self.settings.rolling_stiffness)
-        self._apply_load(self._load())
         self._lx0, self._ly0 = self._lengths()
         self.stage = "cycling"
-        self._emit("cycles", (0, 0.0))
+        self._apply_load(self._load())
+        self._emit_cycle()
         self.mobilised = PairMaximum()
 
     def _apply_load(self, load: CyclicLoad) -> None:
+        """Start a cycle of ``load`` now (q = 0), with the largest stable step that divides its
+        period (the automatic one if the law changed since)."""
+        sim = self._sim
         self.load = load
-        self._start = apply_load(self._sim, load)
-        self._per_cycle = steps_per_cycle(self._sim, load)
-        self._cycle_step = self._sim.step
+        self._start = apply_load(sim, load)
+        sim.set_dt(None)
+        sim.set_dt(load.period / math.ceil(load.period / sim.dt - 1e-9))
+        self._cycle_end = sim.time + load.period
+        self._restart_clock()
 
     def _cycle_done(self) -> None:
         self._cycle += 1
         if self._cycle == 1 and self.auto_watch:
             self.watch = self.mobilised.largest(self.watch_count)
-        self._emit("cycles", (self._cycle, self._gamma()))
-        if self._pending_load is not None:
-            self._apply_load(self._pending_load)
-            self._pending_load = None
+        self._emit_cycle()
+        load = self._pending_load if self._pending_load is not None else self.load
+        self._pending_load = None
+        self._apply_load(load)
+
+    def _emit_cycle(self) -> None:
+        sim = self._sim
+        lx, ly = self._lengths()
+        gamma = self._gamma()
+        self._emit("cycles", (self._cycle, gamma, sim.time, sim.step, lx, ly))
+        self._cycle_gamma.append((self._cycle, gamma))
+        used = [(c, g) for c, g in self._cycle_gamma if c >= self.reference_cycle]
+        if len(used) >= 3:
+            cycles, gammas = np.array(used, dtype=float).T
+            self.verdict = ratchet_verdict(cycles, gammas)
 
     def _gamma(self) -> float:
         if self.stage != "cycling":
@@ -366,40 +608,50 @@ class RatchetPreset(Preset):
     def sample(self) -> None:
         sim = self._sim
         energy = sim.energy()
-        q = self.load.q(sim.time - self._start) if self.stage == "cycling" else 0.0
-        self._emit("time", (sim.time, q, self._gamma(), energy.kinetic, energy.stored, energy.dissipated,
-                            energy.balance, coordination(sim)))
-        for row in _contact_rows(sim, self.watch):
-            self._emit("contacts", (row[0], sim.time) + row[1:])
+        cycling = self.stage == "cycling"
+        q = self.load.q(sim.time - self._start) if cycling else 0.0
+        self._emit("time", (sim.time, self._cycle if cycling else -1, q, self._gamma(), energy.kinetic,
+                            energy.stored, energy.dissipated, energy.balance, coordination(sim)))
+
+    def sample_paths(self) -> None:
+        time = self._sim.time
+        for i, j, normal, tangential, status in _contact_rows(self._sim, self.watch):
+            self._emit("contacts", (i, j, time, normal, tangential, status))
 
     def status(self) -> dict:
         out = super().status()
         out["cycle"] = self._cycle
+        out["strain"] = self._strain_fit()
         return out
+
+    def _strain_fit(self) -> dict | None:
+        """The fitted strain per cycle from the reference cycle on (None before three cycles):
+        the line passes through the mean of the fitted points."""
+        if self.verdict is None:
+            return None
+        v = self.verdict
+        cycles = [c for c, _ in self._cycle_gamma if c >= self.reference_cycle]
+        gamma_ref = dict(self._cycle_gamma)[self.reference_cycle]
+        return {"reference_cycle": self.reference_cycle, "gamma_ref": gamma_ref, "dgamma": v.dgamma,
+                "rms": v.rms_deviation, "ratcheting": v.ratcheting, "cycles_used": v.cycles_used,
+                "mean_cycle": float(np.mean(cycles)), "mean_gamma": float(np.mean(v.gamma))}
 
 
 class Ratchet16Preset(RatchetPreset):
     name = "ratchet16"
     title = "Ratcheting with 16 disks (ratcheting Figs. 1-4)"
-    defaults = {"particles": 16, "steps_per_frame": 20}
+    defaults = {"particles": 16, "speed": 0.5}
+    key_plots = ("strain-per-cycle", "coulomb-cone")
     watch_count = 6
 
 
 class EllipticPreset(RatchetPreset):
     name = "elliptic"
     title = "Elliptic loading without sliding (ratcheting Figs. 5-6)"
-    defaults = {"particles": 16, "friction": math.inf, "phase": 90.0, "steps_per_frame": 20}
+    defaults = {"particles": 16, "friction": math.inf, "phase": 90.0, "speed": 0.5}
+    key_plots = ("strain-per-cycle", "coulomb-cone")
     elliptic = True
     watch_count = 6
-
-
-def coordination(sim: Simulation) -> float:
-    """Mean number of touching disk-disk contacts per disk, 2 M / N."""
-    table = sim.contacts
-    rows = table.count
-    n = sim.particles.count
-    touching = np.isin(table.status[:rows], (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))
-    return 2.0 * int(np.count_nonzero(touching & (table.particle_j[:rows] < n))) / n
 
 
 # ---------------------------------------------------------------------------------------------- closed path
@@ -407,20 +659,27 @@ class ClosedPathPreset(Preset):
     """Ratcheting Fig. 8 three times side by side: one pair per tangential model.
 
     The upper disk of each pair is carried A -> B -> C -> D -> A over and over, without rotating
-    or sliding (mu = inf). Series ``springs``: (t, D_t and D_n of each model).
+    or sliding (mu = inf). Series ``springs``: (t, D_t and D_n of each model), sampled along the
+    loop (its clock unit).
     """
 
     name = "closed-path"
     title = "A closed path, three tangential springs (ratcheting Figs. 8-9)"
     controls = ()
-    defaults = {"particles": 2, "friction": math.inf, "damping_ratio": 0.0, "steps_per_frame": 10}
+    defaults = {"particles": 2, "friction": math.inf, "damping_ratio": 0.0, "speed": 0.5}
     series = {"springs": ("t", "dt_cundall_strack", "dt_alpha", "dt_angle", "dn_cundall_strack", "dn_alpha",
                           "dn_angle")}
+    path_series = ("springs",)
+    plots = key_plots = ("spring-path", "springs")
+    clock_unit = "loop"
+    time_label = "t (one loop lasts 0.4)"
+    path_samples_per_cycle = 200
     radius = 0.5
     overlap = 0.01
     depth = 0.02
     turn = 0.2
     steps_per_side = 100
+    dt = 1e-3
 
     def _build(self) -> None:
         d_a = 2 * self.radius - self.overlap
@@ -431,9 +690,12 @@ class ClosedPathPreset(Preset):
         for model in TANGENTIAL_MODELS:
             law = ContactLaw(normal_stiffness=1e4, tangential_stiffness=1e4, friction=math.inf, tangential_model=model)
             particles = ParticleState([[0.0, d_a], [0.0, 0.0]], [self.radius, self.radius], kind=["kinematic", "fixed"])
-            self._sims.append(Simulation(particles, law, Integration(dt=1e-3, initial_overlap=0.05)))
+            self._sims.append(Simulation(particles, law, Integration(dt=self.dt, initial_overlap=0.05)))
         self._k = 0
         self.stage = "looping"
+
+    def cycle_time(self) -> float:
+        return 4 * self.steps_per_side * self.dt
 
     def views(self) -> list[View]:
         return [View(sim, (3.0 * index, 0.0)) for index, sim in enumerate(self._sims)]
@@ -445,15 +707,19 @@ class ClosedPathPreset(Preset):
         r, a = r0 + (r1 - r0) * s, a0 + (a1 - a0) * s
         return np.array([r * math.cos(a), r * math.sin(a)])
 
-    def _advance(self, steps: int) -> None:
+    def _advance(self, steps: int) -> int:
         for _ in range(steps):
             target = self._target(self._k)
             for sim in self._sims:
                 sim.set_motion(0, (target - sim.particles.position[0]) / sim.dt, 0.0)
                 sim.run(1)
             self._k += 1
+        return steps
 
     def sample(self) -> None:
+        """The springs are the only series, sampled along the loop (:meth:`sample_paths`)."""
+
+    def sample_paths(self) -> None:
         row = [self._sims[0].time]
         row += [float(sim.contacts.tangential_spring[0]) for sim in self._sims]
         row += [float(sim.contacts.surface_gap[0]) for sim in self._sims]
@@ -464,20 +730,27 @@ class ClosedPathPreset(Preset):
         out["loops"] = self._k // (4 * self.steps_per_side)
         return out
 
+    def readout(self) -> dict:
+        return {"loops": self._k // (4 * self.steps_per_side)}
+
 
 # ---------------------------------------------------------------------------------------------- block
 class BlockPreset(Preset):
     """Quasi-rigidity Figs. 2-3: a disk that cannot turn, pressed on a wall, pushed sideways by a
     load that rises to 1.5 mu F_n and falls back, over and over (period ``period``).
 
-    Series ``block`` (t, load / (mu F_n), N^e, F_t, status, velocity).
+    Series ``block`` (t, load / (mu F_n), N^e, F_t, status, velocity), sampled as a path.
     """
 
     name = "block"
     title = "A block on a plane: the principle of minimum sliding (quasi-rigidity Figs. 2-3)"
     controls = ("friction", "period", "damping_ratio")
-    defaults = {"particles": 1, "friction": 0.5, "period": 20.0, "damping_ratio": 0.7, "steps_per_frame": 20}
+    defaults = {"particles": 1, "friction": 0.5, "period": 20.0, "damping_ratio": 0.7, "speed": 0.5}
     series = {"block": ("t", "load_ratio", "normal", "tangential", "status", "velocity")}
+    path_series = ("block",)
+    plots = key_plots = ("block-cone", "block-load")
+    time_label = "t (units of m = 1, F_n = 1, K = 1000)"
+    load_every = 10
 
     def _build(self) -> None:
         s = self.settings
@@ -492,17 +765,31 @@ class BlockPreset(Preset):
         self.watch = [(0, 1)]
         self.stage = "loading"
 
-    def _advance(self, steps: int) -> None:
+    def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
+        return {"period": self._period_rule(values)}
+
+    def _advance(self, steps: int) -> int:
+        """The sideways load is set every ``load_every`` steps (a ramp in small stairs)."""
         sim = self._sim
-        for _ in range(max(1, steps // 10)):
+        done = 0
+        while done < steps:
+            block = min(self.load_every, steps - done)
             sim.particles.external_force[0, 0] = self._load_ratio() * sim.law.friction * self._normal_load
-            sim.run(10)
+            sim.run(block)
+            done += block
+        return done
+
+    def readout(self) -> dict:
+        return {"sliding": sliding_contacts(self._sim), "load": self._load_ratio()}
 
     def _load_ratio(self) -> float:
         phase = (self._sim.time % self.settings.period) / self.settings.period
         return 1.5 * (2.0 * phase if phase < 0.5 else 2.0 - 2.0 * phase)
 
     def sample(self) -> None:
+        """The block's series is a path, sampled at the path cadence (:meth:`sample_paths`)."""
+
+    def sample_paths(self) -> None:
         sim = self._sim
         contact = sim.contact_snapshot()
         touching = contact.count > 0
@@ -513,8 +800,19 @@ class BlockPreset(Preset):
 
 # ---------------------------------------------------------------------------------------------- Gilabert
 class GilabertPreset(Preset):
-    """The presets of Gilabert's preparations: the rolling dashpot's damping ratio is the normal
-    one, ``damping_ratio``, also when that control changes."""
+    """The presets of Gilabert's preparations: time in T_0 = sqrt(m a / F_1) (1 here: a disk of
+    diameter a = 1 has mass 1, F_1 = 1); the rolling dashpot's damping ratio is the normal one,
+    ``damping_ratio``, also when that control changes."""
+
+    clock_unit = "T₀"
+    time_label = "t (T₀ = √(m a/F₁))"
+    samples_per_cycle = 2
+    path_samples_per_cycle = 2
+    frames_per_cycle = 0.2
+    particle_range = (10, 20000)
+
+    def cycle_time(self) -> float:
+        return 1.0
 
     def _changed(self, changes: dict) -> None:
         if "damping_ratio" in changes:
@@ -534,8 +832,10 @@ class AggregationPreset(GilabertPreset):
     title = "Cohesive powder: aggregation (Gilabert method 2, Figs. 4 and 11)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "particles", "seed", "damping_ratio")
     defaults = {"particles": 300, "friction": 0.15, "cohesion_force": 1.0, "cohesion_range": 1e-3,
-                "damping_ratio": 0.8, "steps_per_frame": 100}
+                "damping_ratio": 0.8, "speed": math.inf}
     series = {"time": ("t", "z", "phi", "clusters", "kinetic")}
+    plots = ("clusters", "coordination-gilabert", "solid-fraction", "kinetic")
+    key_plots = ("clusters", "coordination-gilabert")
     kappa = 1e3
     pressure = 0.01
     #: longest time of each stage: a stage that has not met its criterion by then ends anyway
@@ -549,7 +849,7 @@ class AggregationPreset(GilabertPreset):
         if s.rolling_friction > 0:
             law = law.replace(rolling_friction=s.rolling_friction,
                               rolling_stiffness=s.rolling_stiffness or law.rolling_stiffness)
-        r, positions, length = _gas(s.particles, 0.36, s.seed, 1.0)
+        r, positions, length = gilabert_gas(s.particles, 0.36, s.seed)
         rng = np.random.default_rng(s.seed + 7)
         speed = math.sqrt(law.cohesion_force * law.cohesion_range)
         velocity = rng.normal(0.0, speed / math.sqrt(2.0), size=(s.particles, 2))
@@ -561,11 +861,11 @@ class AggregationPreset(GilabertPreset):
         self._stage_start = 0.0
         self._next_check = 0.0
 
-    def _advance(self, steps: int) -> None:
+    def _advance(self, steps: int) -> int:
         sim = self._sim
         sim.run(steps)
         if sim.time < self._next_check:
-            return
+            return steps
         self._next_check = sim.time + 5.0
         late = sim.time - self._stage_start > self.stage_limits.get(self.stage, math.inf)
         if self.stage == "aggregating":
@@ -581,6 +881,7 @@ class AggregationPreset(GilabertPreset):
                 self._next_stage("equilibrated", False)
             elif late:
                 self._next_stage("compressed", True)
+        return steps
 
     def _next_stage(self, stage: str, late: bool, pressure: float | None = None) -> None:
         """Go on to ``stage`` (``late``: the time limit of the last one ran out before its
@@ -599,8 +900,7 @@ class AggregationPreset(GilabertPreset):
 
     def sample(self) -> None:
         sim = self._sim
-        phi = math.pi * float(np.sum(sim.particles.radius ** 2)) / float(np.prod(sim.cell.length))
-        self._emit("time", (sim.time, coordination(sim), phi, clusters(sim), sim.energy().kinetic))
+        self._emit("time", (sim.time, coordination(sim), solid_fraction(sim), clusters(sim), sim.energy().kinetic))
 
 
 class CompressionPreset(GilabertPreset):
@@ -612,8 +912,10 @@ class CompressionPreset(GilabertPreset):
     title = "Compression of a granular gas (Gilabert method 1)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "particles", "seed",
                 "damping_ratio")
-    defaults = {"particles": 300, "friction": 0.15, "damping_ratio": 0.8, "steps_per_frame": 100}
+    defaults = {"particles": 300, "friction": 0.15, "damping_ratio": 0.8, "speed": math.inf}
     series = {"time": ("t", "z", "phi", "pressure", "kinetic")}
+    plots = ("solid-fraction", "coordination-gilabert", "pressure", "kinetic")
+    key_plots = ("solid-fraction", "coordination-gilabert")
 
     def _build(self) -> None:
         s = self.settings
@@ -621,25 +923,26 @@ class CompressionPreset(GilabertPreset):
         self.pressure = 0.01 if cohesive else 1.0
         law = gilabert_law(friction=s.friction, kappa=1e3, cohesion=cohesive, rolling=s.rolling_friction > 0,
                            pressure=self.pressure, damping_ratio=s.damping_ratio, rolling_damping_ratio=s.damping_ratio)
-        r, positions, length = _gas(s.particles, 0.36, s.seed, 1.0)
+        r, positions, length = gilabert_gas(s.particles, 0.36, s.seed)
         cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(self.pressure, self.pressure))
         self._sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi), law, Integration(dt_safety=0.3),
                                cell=cell)
         self.stage = "compressing"
         self._next_check = 0.0
 
-    def _advance(self, steps: int) -> None:
+    def _advance(self, steps: int) -> int:
         sim = self._sim
         sim.run(steps)
         if sim.time >= self._next_check:
             self._next_check = sim.time + 2.0
             if self.stage == "compressing" and equilibrium(sim, self.pressure).equilibrated:
                 self.stage = "equilibrated"
+        return steps
 
     def sample(self) -> None:
         sim = self._sim
-        phi = math.pi * float(np.sum(sim.particles.radius ** 2)) / float(np.prod(sim.cell.length))
-        self._emit("time", (sim.time, coordination(sim), phi, measured_pressure(sim), sim.energy().kinetic))
+        self._emit("time", (sim.time, coordination(sim), solid_fraction(sim), measured_pressure(sim),
+                            sim.energy().kinetic))
 
 
 PRESETS = {cls.name: cls for cls in (RatchetPreset, Ratchet16Preset, EllipticPreset, ClosedPathPreset, BlockPreset,
