@@ -1,16 +1,19 @@
 """Ring buffers of time-series rows with sequence numbers (one writer, many readers).
 
-The engine thread appends rows; each browser session remembers the last sequence number it
-has seen and asks for the rows after it. A reset (new preset, reset, replay) starts a new
-generation: a reader of an older generation gets everything again and a ``reset`` flag.
-Readers never hold the lock longer than a copy of the rows they asked for.
+The engine thread appends rows (numbers only); each browser session remembers the last
+sequence number it has seen and asks for the rows after it, however many arrived meanwhile
+(up to the capacity: a reader that fell further behind gets the newest ``capacity`` rows). A
+reset (new preset, reset, replay) starts a new generation: a reader of an older generation
+gets everything again and a ``reset`` flag. Rows live in one preallocated float64 array, so
+appending and reading cost a copy, not a Python object per value.
 """
 
 from __future__ import annotations
 
 import threading
-from collections import deque
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -26,38 +29,90 @@ class SeriesBuffer:
 
     def __init__(self, columns: tuple[str, ...], capacity: int = 20000):
         self.columns = tuple(columns)
-        self._rows: deque = deque(maxlen=capacity)
+        self.capacity = int(capacity)
+        self._data = np.zeros((self.capacity, len(self.columns)))
         self._seq = 0
         self._generation = 0
         self._lock = threading.Lock()
 
-    def extend(self, rows: list[tuple]) -> None:
+    def extend(self, rows) -> None:
+        """Append rows (a sequence of tuples, or an (R, C) array); only the newest ``capacity``
+        of them are kept."""
+        block = np.asarray(rows, dtype=np.float64).reshape(-1, len(self.columns))[-self.capacity:]
         with self._lock:
-            for row in rows:
-                self._seq += 1
-                self._rows.append((self._seq, row))
+            start = self._seq % self.capacity
+            first = min(len(block), self.capacity - start)
+            self._data[start:start + first] = block[:first]
+            self._data[:len(block) - first] = block[first:]
+            self._seq += len(block)
 
     def reset(self, columns: tuple[str, ...] | None = None) -> None:
         """Drop every row and start a new generation (optionally with other columns)."""
         with self._lock:
-            self._rows.clear()
+            self._seq = 0
             self._generation += 1
-            if columns is not None:
+            if columns is not None and tuple(columns) != self.columns:
                 self.columns = tuple(columns)
+                self._data = np.zeros((self.capacity, len(self.columns)))
+
+    def _rows_after(self, seq: int) -> np.ndarray:
+        """Rows with sequence numbers above ``seq`` still held, oldest first (lock held)."""
+        count = min(self._seq - seq, self._seq, self.capacity)
+        if count <= 0:
+            return np.zeros((0, len(self.columns)))
+        index = np.arange(self._seq - count, self._seq) % self.capacity
+        return self._data[index]
 
     def since(self, cursor: Cursor) -> tuple[Cursor, bool, dict[str, list]]:
         """Rows after ``cursor`` as columns; ``reset`` is true when the reader must start over."""
         with self._lock:
             reset = cursor.generation != self._generation
-            seq = 0 if reset else cursor.seq
-            count = len(self._rows)
-            first = self._seq - count + 1  # sequence numbers in the buffer are contiguous
-            start = max(0, seq + 1 - first)
-            rows = [self._rows[k][1] for k in range(start, count)]
+            rows = self._rows_after(0 if reset else cursor.seq)
             new = Cursor(self._generation, self._seq)
-            columns_names = self.columns
-        columns = {name: [row[index] for row in rows] for index, name in enumerate(columns_names)}
-        return new, reset, columns
+            names = self.columns
+        return new, reset, {name: rows[:, k].tolist() for k, name in enumerate(names)}
+
+    def array(self) -> np.ndarray:
+        """Every row held, oldest first, as an (R, C) array (a copy)."""
+        with self._lock:
+            return self._rows_after(0).copy()
 
     def __len__(self) -> int:
-        return len(self._rows)
+        with self._lock:
+            return min(self._seq, self.capacity)
+
+
+@dataclass(frozen=True)
+class Message:
+    """A message for the user: ``level`` (info, warning, error), ``text`` and the ``control``
+    that caused it (a settings key such as ``amplitude``, or ``save``, ``load``, ``watch``,
+    ``preset``, ``run``, ``analysis``, ``record``), so a page shows it next to that control."""
+
+    seq: int
+    level: str
+    text: str
+    control: str = ""
+
+
+class MessageLog:
+    """The last ``capacity`` messages with sequence numbers (one writer, many readers)."""
+
+    def __init__(self, capacity: int = 200):
+        self._messages: list[Message] = []
+        self._seq = 0
+        self.capacity = capacity
+        self._lock = threading.Lock()
+
+    def add(self, level: str, text: str, control: str = "") -> None:
+        with self._lock:
+            self._seq += 1
+            self._messages = self._messages[-(self.capacity - 1):] + [Message(self._seq, level, text, control)]
+
+    @property
+    def latest_seq(self) -> int:
+        return self._seq
+
+    def since(self, seq: int) -> list[Message]:
+        """Messages after sequence number ``seq``, oldest first."""
+        with self._lock:
+            return [m for m in self._messages if m.seq > seq]

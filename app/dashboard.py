@@ -1,35 +1,46 @@
-"""The dashboard of one browser tab: controls, the embedded 3D scene, live plots.
+"""The page of one browser tab: one projector screen.
 
-Every tab builds its own widgets, bokeh figures and ColumnDataSources (bokeh models cannot be
-shared between sessions) and pulls, every 200 ms, the rows it has not seen from the engine's
-ring buffers. Controls only queue commands for the engine thread; nothing here waits on it.
+A header with the preset, play/pause/step/restart, the speed in the preset's clock units and a
+readout strip; below it the controls on the left (each with its own message line), the 3D
+scene with its legend (and a timeline during a replay) in the middle, and on the right the two
+plots the preset is about, with the other plots, the preset's explanation and the Analysis tab
+one click away. Nothing needs scrolling at 1920×1080 or 1366×768.
+
+Every tab builds its own widgets, bokeh figures and sources (bokeh models cannot be shared
+between sessions) and pulls, every 200 ms, the rows it has not seen from the engine's ring
+buffers. Controls only queue commands for the engine thread; nothing here waits on it. A value
+the engine refuses goes back to the value in effect, with the message next to its control.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
 import panel as pn
-from bokeh.models import ColumnDataSource, Span
-from bokeh.plotting import figure
+from bokeh.models import ColumnDataSource
 
 from engine.analysis.report import ANALYSES
-from engine.errors import ParameterError
 from engine.params import TANGENTIAL_MODELS
-from engine.protocols.presets import PRESETS, LabSettings
+from engine.protocols.presets import CONTROL_LABELS, PRESETS
 
 from . import analysis
 from .buffers import Cursor
-from .drawing import COLOR_FIELDS
+from .drawing import COLOR_FIELDS, legend_html
+from .plots import compact, lab_figure, legend_above, make_plot
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
-TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
-ROLLOVER = 5000
 PRESET_OPTIONS = {cls.title: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
-STATUS_COLORS = {0: "#bbbbbb", 1: "#1f77b4", 2: "#d62728", 3: "#ff7f0e", 4: "#2ca02c"}
+SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
+          "50": 50.0, "max": math.inf}
+"""Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
+PANES = ("Key plots", "More plots", "About this preset", "Analysis")
+HEADER_HEIGHT = 58
+NOTE_SECONDS = 12.0
+"""How long a confirmation stays next to its control (errors stay until the next message)."""
 
 
 def teaching_text(preset: str) -> str:
@@ -37,11 +48,15 @@ def teaching_text(preset: str) -> str:
     return path.read_text() if path.is_file() else f"*No teaching text for preset {preset!r}.*"
 
 
-def _figure(name: str, title: str, x: str, y: str, **kwargs):
-    fig = figure(name=f"figure-{name}", title=title, tools=TOOLS, height=260, sizing_mode="stretch_width",
-                 x_axis_label=x, y_axis_label=y, **kwargs)
-    fig.toolbar.logo = None
-    return fig
+def _speed_label(speed) -> str:
+    value = math.inf if isinstance(speed, str) else float(speed)
+    return min(SPEEDS, key=lambda label: abs(math.log(SPEEDS[label]) - math.log(value))
+               if math.isfinite(SPEEDS[label]) and math.isfinite(value) else (0 if SPEEDS[label] == value else 99))
+
+
+def _note(level: str, text: str) -> str:
+    color = {"error": "#b00020", "warning": "#8a5a00"}.get(level, "#1b5e20")
+    return f"<div style='font-size:12px;color:{color};line-height:1.3'>{text}</div>"
 
 
 class Dashboard:
@@ -51,115 +66,124 @@ class Dashboard:
         self.engine = engine
         self.scene = scene
         self.cursors: dict[str, Cursor] = {}
-        self.message_cursor = Cursor()
+        self.message_seq = engine.messages.latest_seq
         self.preset_shown = None
-        self.sources: dict[str, ColumnDataSource] = {}
-        self._all_sources: dict[str, ColumnDataSource] = {}
-        self._panes: dict[str, pn.pane.Bokeh] = {}
+        self.plots: dict = {}
+        self.shown: list = []
         self._syncing = False
         self._analysis_seen = 0
-        status = engine.status()
-        self._build_widgets(status)
+        self._legend_key = None
+        self._replay_shown = None
+        self.notes: dict[str, pn.pane.HTML] = {}
+        self._note_shown: dict[str, float] = {}
+        self._build_widgets()
         self.analysis_view = self._build_analysis()
-        self.tab_choice = pn.widgets.RadioButtonGroup(options=["Plots", "Analysis"], value="Plots",
-                                                      css_classes=["tab-choice"])
-        self.tab_choice.param.watch(self._show_tab, "value")
-        self.plots = pn.Column(sizing_mode="stretch_width")
+        self.pane_choice = pn.widgets.RadioButtonGroup(options=list(PANES), value=PANES[0],
+                                                       css_classes=["pane-choice"], sizing_mode="stretch_width")
+        self.pane_choice.param.watch(lambda e: self._show_pane(), "value")
+        self.right = pn.Column(sizing_mode="stretch_both", styles={"flex": "1 1 0"})
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
-        self.status_line = pn.pane.Markdown("", css_classes=["status-line"])
-        self.alert = pn.pane.Alert("", alert_type="info", visible=False, css_classes=["lab-message"])
+        self.about = pn.Column(self.teaching, sizing_mode="stretch_both", scroll=True)
+        self.readout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["readout"])
+        self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
-            f'<iframe src="{scene_url}" title="3D scene" style="width:100%;height:520px;border:0"></iframe>',
-            sizing_mode="stretch_width", height=530)
+            f'<iframe src="{scene_url}" title="3D scene" style="width:100%;height:100%;border:0"></iframe>',
+            sizing_mode="stretch_both", min_height=300, css_classes=["scene"])
+        self.key_names: list[str] = []
+        self.page = self._layout()
         self._refresh()
 
     # ------------------------------------------------------------------ widgets
-    def _build_widgets(self, status: dict) -> None:
-        settings = status.get("settings") or vars(LabSettings())
+    def _note_pane(self, key: str) -> pn.pane.HTML:
+        pane = self.notes[key] = pn.pane.HTML("", visible=False, sizing_mode="stretch_width",
+                                              css_classes=[f"note-{key}", "control-note"], margin=(0, 10, 4, 10))
+        return pane
+
+    def _build_widgets(self) -> None:
         W = pn.widgets
-        self.preset = W.Select(name="Preset", options=PRESET_OPTIONS, value="ratchet", css_classes=["preset-select"])
-        self.play = W.Button(name="Pause", button_type="primary", css_classes=["play-button"])
-        self.step = W.Button(name="Step", css_classes=["step-button"])
-        self.reset = W.Button(name="Reset", button_type="warning", css_classes=["reset-button"])
-        self.phase = W.FloatSlider(name="Loading phase φ (°)", start=-180, end=180, step=5,
-                                   value=float(settings["phase"]), css_classes=["phase-slider"])
-        self.amplitude = W.FloatInput(name="Amplitude Δσ", value=float(settings["amplitude"]), step=0.05,
-                                      css_classes=["amplitude-input"])
-        self.pressure = W.FloatInput(name="Pressure P0", value=float(settings["pressure"]), step=0.1,
-                                     css_classes=["pressure-input"])
-        self.period = W.FloatInput(name="Period T", value=float(settings["period"]), step=1.0,
-                                   css_classes=["period-input"])
-        friction = settings["friction"]
-        infinite = not isinstance(friction, (int, float)) or math.isinf(float(friction))
-        self.friction = W.FloatSlider(name="Friction μ", start=0.0, end=1.0, step=0.01,
-                                      value=0.2 if infinite else float(friction), css_classes=["friction-slider"])
-        self.no_sliding = W.Checkbox(name="μ = ∞ (no sliding)", value=infinite, css_classes=["friction-infinite"])
-        self.rolling_friction = W.FloatInput(name="Rolling friction μr", value=float(settings["rolling_friction"]),
-                                             step=0.001, css_classes=["rolling-friction-input"])
-        self.rolling_stiffness = W.FloatInput(name="Rolling stiffness Kr", value=float(settings["rolling_stiffness"]),
-                                              step=0.1, css_classes=["rolling-stiffness-input"])
-        self.cohesion_force = W.FloatInput(name="Cohesion F0", value=float(settings["cohesion_force"]), step=0.1,
-                                           css_classes=["cohesion-force-input"])
-        self.cohesion_range = W.FloatInput(name="Cohesion range D0", value=float(settings["cohesion_range"]),
-                                           step=0.001, css_classes=["cohesion-range-input"])
-        self.model = W.Select(name="Tangential spring", options=list(TANGENTIAL_MODELS),
-                              value=settings["tangential_model"], css_classes=["model-select"])
-        self.damping = W.FloatSlider(name="Damping ζ", start=0.0, end=0.95, step=0.05,
-                                     value=float(settings["damping_ratio"]), css_classes=["damping-slider"])
-        self.particles = W.IntInput(name="Disks N", value=int(settings["particles"]), css_classes=["particles-input"])
-        self.seed = W.IntInput(name="Seed", value=int(settings["seed"]), css_classes=["seed-input"])
-        self.apply_reset = W.Button(name="Apply N and seed (reset)", css_classes=["apply-reset-button"])
-        self.speed = W.IntSlider(name="Speed (steps per frame)", start=1, end=2000,
-                                 value=int(settings["steps_per_frame"]), css_classes=["speed-slider"])
+        wide = {"sizing_mode": "stretch_width"}
+        self.preset = W.Select(options=PRESET_OPTIONS, value="ratchet", css_classes=["preset-select"], width=340,
+                               margin=(12, 10, 5, 10))
+        self.play = W.Button(name="Pause", button_type="primary", css_classes=["play-button"], width=80,
+                             margin=(12, 4, 5, 4))
+        self.step = W.Button(name="Step", css_classes=["step-button"], width=60, margin=(12, 4, 5, 4))
+        self.reset = W.Button(name="Restart preset", button_type="warning", css_classes=["reset-button"], width=120,
+                              margin=(12, 4, 5, 4))
+        self.speed = W.DiscreteSlider(name="Speed", options=SPEEDS, value=1.0, css_classes=["speed-slider"],
+                                      width=230, margin=(2, 12, 5, 12))
+        self.phase = W.FloatSlider(name="Loading phase φ (°)", start=-180, end=180, step=5, value=0.0,
+                                   css_classes=["phase-slider"], **wide)
+        self.amplitude = W.FloatInput(name="Amplitude Δσ", value=0.2, step=0.05, css_classes=["amplitude-input"], **wide)
+        self.pressure = W.FloatInput(name="Pressure P0", value=1.0, step=0.1, css_classes=["pressure-input"], **wide)
+        self.period = W.FloatInput(name="Period T", value=10.0, step=1.0, css_classes=["period-input"], **wide)
+        self.friction = W.FloatSlider(name="Friction μ", start=0.0, end=1.0, step=0.01, value=0.2,
+                                      css_classes=["friction-slider"], **wide)
+        self.no_sliding = W.Checkbox(name="μ = ∞ (no sliding)", value=False, css_classes=["friction-infinite"])
+        self.model = W.Select(name="Tangential spring", options=list(TANGENTIAL_MODELS), css_classes=["model-select"],
+                              **wide)
+        self.damping = W.FloatSlider(name="Damping ζ", start=0.0, end=0.95, step=0.05, value=0.3,
+                                     css_classes=["damping-slider"], **wide)
+        self.rolling_friction = W.FloatInput(name="Rolling friction μr", value=0.0, step=0.001,
+                                             css_classes=["rolling-friction-input"], **wide)
+        self.rolling_stiffness = W.FloatInput(name="Rolling stiffness Kr", value=0.0, step=0.1,
+                                              css_classes=["rolling-stiffness-input"], **wide)
+        self.cohesion_force = W.FloatInput(name="Cohesion F0", value=0.0, step=0.1,
+                                           css_classes=["cohesion-force-input"], **wide)
+        self.cohesion_range = W.FloatInput(name="Cohesion range D0", value=0.0, step=0.001,
+                                           css_classes=["cohesion-range-input"], **wide)
+        self.particles = W.IntInput(name="Disks N", value=256, css_classes=["particles-input"], **wide)
+        self.seed = W.IntInput(name="Seed", value=0, css_classes=["seed-input"], **wide)
+        self.apply_reset = W.Button(name="Apply N and seed (restart)", css_classes=["apply-reset-button"], **wide)
         self.color = W.Select(name="Colour disks by", options=list(COLOR_FIELDS), value=self.scene.color_field,
-                              css_classes=["color-select"])
-        self.watch = W.TextInput(name="Watch contact (i j)", placeholder="e.g. 3 7", css_classes=["watch-input"])
-        self.watch_button = W.Button(name="Watch / unwatch", css_classes=["watch-button"])
-        self.save_name = W.TextInput(name="Save as", placeholder="run1.h5", css_classes=["save-name"])
-        self.save = W.Button(name="Save run", css_classes=["save-button"])
+                              css_classes=["color-select"], **wide)
+        self.watch = W.TextInput(name="Watch a contact: disks i j (or click a disk)", placeholder="e.g. 3 7",
+                                 css_classes=["watch-input"], **wide)
+        self.watch_button = W.Button(name="Watch / unwatch", css_classes=["watch-button"], **wide)
+        self.save_name = W.TextInput(name="Save the run as", placeholder="run1.h5", css_classes=["save-name"], **wide)
+        self.save = W.Button(name="Save run", css_classes=["save-button"], **wide)
         self.load_name = W.Select(name="Replay a saved run", options=self.engine.saved_files(),
-                                  css_classes=["load-select"])
-        self.load = W.Button(name="Load and replay", css_classes=["load-button"])
+                                  css_classes=["load-select"], **wide)
+        self.load = W.Button(name="Load and replay", css_classes=["load-button"], **wide)
+        self.record_name = W.TextInput(name="Movie of the recent frames", placeholder="movie1.gif or .mp4",
+                                       css_classes=["record-name"], **wide)
+        self.record_seconds = W.FloatInput(name="of the last (simulated time)", value=20.0, step=5.0,
+                                           css_classes=["record-seconds"], **wide)
+        self.record = W.Button(name="Record movie", css_classes=["record-button"], **wide)
+        self.timeline = W.IntSlider(name="Frame", start=0, end=1, value=0, css_classes=["replay-slider"],
+                                    sizing_mode="stretch_width")
 
         self.preset.param.watch(lambda e: e.new in PRESETS and self._command("preset", name=e.new), "value")
-        self.play.on_click(self._toggle_play)
+        self.play.on_click(lambda e: self.engine.submit("pause" if self.play.name == "Pause" else "play"))
         self.step.on_click(lambda e: self.engine.submit("step"))
         self.reset.on_click(lambda e: self.engine.submit("reset"))
+        self.speed.param.watch(lambda e: self._control("speed", e.new), "value")
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
                 (self.rolling_stiffness, "rolling_stiffness"), (self.cohesion_force, "cohesion_force"),
-                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"),
-                (self.damping, "damping_ratio"), (self.speed, "steps_per_frame")]
+                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model")]
         for widget, key in live:
             widget.param.watch(lambda e, key=key: self._control(key, e.new), "value")
-        self.settings_widgets = live + [(self.friction, "friction"), (self.no_sliding, "friction"),
-                                        (self.particles, "particles"), (self.seed, "seed")]
+        self.damping.param.watch(lambda e: self._control("damping_ratio", e.new), "value_throttled")
         self.friction.param.watch(lambda e: self._friction(), "value_throttled")
         self.no_sliding.param.watch(lambda e: self._friction(), "value")
-        self.apply_reset.on_click(lambda e: self._control_many(particles=self.particles.value, seed=self.seed.value))
+        self.settings_widgets = live + [(self.damping, "damping_ratio"), (self.friction, "friction"),
+                                        (self.no_sliding, "friction"), (self.particles, "particles"),
+                                        (self.seed, "seed")]
+        self.apply_reset.on_click(lambda e: self._command("apply", changes={"particles": self.particles.value,
+                                                                             "seed": self.seed.value}))
         self.color.param.watch(self._color, "value")
         self.watch_button.on_click(self._watch)
         self.save.on_click(lambda e: self._command("save", name=self.save_name.value.strip()))
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
-
-    def _toggle_play(self, event) -> None:
-        self.engine.submit("pause" if self.play.name == "Pause" else "play")
+        self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
+                                                     seconds=self.record_seconds.value))
+        self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new)), "value_throttled")
 
     def _friction(self) -> None:
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
 
     def _control(self, key: str, value) -> None:
-        self._control_many(**{key: value})
-
-    def _control_many(self, **changes) -> None:
-        if self._syncing:
-            return
-        try:
-            LabSettings().replace(**changes)
-        except (ParameterError, TypeError) as error:
-            self._show("error", str(error))
-            return
-        self._command("apply", changes=changes)
+        self._command("apply", changes={key: value})
 
     def _command(self, command: str, **payload) -> None:
         if self._syncing:
@@ -167,177 +191,105 @@ class Dashboard:
         self.engine.submit(command, **payload)
 
     def _color(self, event) -> None:
-        try:
-            self.scene.color_field = event.new
-        except ValueError as error:
-            self._show("error", str(error))
+        self.scene.color_field = event.new
+        self._legend_key = None
 
     def _watch(self, event) -> None:
         try:
             i, j = (int(v) for v in self.watch.value.split())
         except ValueError:
-            self._show("error", f"watch contact = {self.watch.value!r} is not allowed: two disk indices 'i j' "
-                                "(j >= N names a wall)")
+            self._note("watch", "error", f"“{self.watch.value}” is not a contact: two disk numbers “i j” "
+                                         "(a number from N on names a wall)")
             return
         self.engine.submit("watch", pair=(i, j))
 
-    def _show(self, level: str, text: str) -> None:
-        self.alert.alert_type = "danger" if level == "error" else "info"
-        self.alert.object = text
-        self.alert.visible = True
+    def _note(self, key: str, level: str, text: str) -> None:
+        key = key if key in self.notes else "run"
+        pane = self.notes[key]
+        pane.object = _note(level, text)
+        pane.visible = True
+        self._note_shown[key] = math.inf if level == "error" else time.monotonic()
+
+    def _expire_notes(self) -> None:
+        now = time.monotonic()
+        for key, shown in list(self._note_shown.items()):
+            if now - shown > NOTE_SECONDS:
+                self.notes[key].visible = False
+                del self._note_shown[key]
 
     # ------------------------------------------------------------------ plots
-    def _build_plots(self, preset: str, series: list[str]) -> None:
-        """Show the figures of ``preset``. Each figure and source is made once per tab and reused
-        when a later preset needs it again (bokeh keeps removed models in the document)."""
-        self.sources = {}
-        figures = []
-        if "cycles" in series:
-            self._use("cycles", ("cycle", "gamma"), "strain-cycles")
-            self._use("fit", ("cycle", "gamma"), "strain-fit")
-            figures.append(self._figure_once("strain-per-cycle", self._strain_figure))
-        if "time" in series:
-            columns = PRESETS[preset].series["time"]
-            gilabert = "phi" in columns
-            self._use("time", columns, "gilabert-series" if gilabert else "time-series")
-            if gilabert:
-                figures += [self._figure_once("coordination-gilabert", lambda: self._line_figure(
-                                "coordination-gilabert", "Coordination number z", "t", "z", "z")),
-                            self._figure_once("solid-fraction", lambda: self._line_figure(
-                                "solid-fraction", "Solid fraction Φ", "t", "Φ", "phi"))]
-            else:
-                figures += [self._figure_once("q-gamma", self._q_gamma_figure),
-                            self._figure_once("energy", self._energy_figure),
-                            self._figure_once("coordination", lambda: self._line_figure(
-                                "coordination", "Coordination number z", "t", "z", "z"))]
-        if "contacts" in series:
-            self._use("contacts", ("watch", "t", "normal", "tangential", "status", "color"), "cone-paths")
-            self._use("cone", ("x", "y"), "cone-lines")
-            figures.append(self._figure_once("coulomb-cone", lambda: self._cone_figure(
-                "coulomb-cone", "Watched contacts in the (F_n, F_t) plane", "contacts")))
-        if "springs" in series:
-            self._use("springs", PRESETS["closed-path"].series["springs"], "springs")
-            figures += [self._figure_once("springs", self._springs_figure),
-                        self._figure_once("spring-path", self._spring_path_figure)]
-        if "block" in series:
-            self._use("block", ("t", "load_ratio", "normal", "tangential", "status", "velocity", "color"), "block")
-            self._use("cone", ("x", "y"), "cone-lines")
-            figures += [self._figure_once("block-cone", lambda: self._cone_figure(
-                            "block-cone", "Block contact in the (F_n, F_t) plane", "block")),
-                        self._figure_once("block-load", self._block_load_figure)]
-        if "replay" in series:
-            self._use("replay", ("t", "step", "kinetic", "stored", "dissipated", "balance"), "replay-energy")
-            figures.append(self._figure_once("replay-energy", self._replay_figure))
-        self.plots.objects = [self._panes[name] for name in figures]
+    def _use_plots(self, names: list[str], time_label: str, columns: dict, reference_cycle: int = 0) -> None:
+        """Show the plots ``names`` (made once per tab and time axis, emptied for the new source)."""
+        self.cursors = {}
+        for name in names:
+            plot = self.plots.get((name, time_label))
+            if plot is None:
+                plot = self.plots[(name, time_label)] = make_plot(name, time_label, columns, reference_cycle)
+            plot.clear()
+            for series in plot.reads:
+                self.cursors[series] = Cursor()
+        self.shown = [self.plots[(name, time_label)] for name in names]
 
-    def _use(self, key: str, columns, name: str) -> ColumnDataSource:
-        """The tab's source ``name`` (made once), emptied, for series ``key``."""
-        source = self._all_sources.get(name)
-        if source is None:
-            source = self._all_sources[name] = ColumnDataSource({column: [] for column in columns}, name=name)
-        source.data = {column: [] for column in columns}
-        self.sources[key] = source
-        self.cursors[key] = Cursor()
-        return source
-
-    def _figure_once(self, name: str, make) -> str:
-        if name not in self._panes:
-            self._panes[name] = pn.pane.Bokeh(make(), sizing_mode="stretch_width")
-        return name
-
-    def _strain_figure(self):
-        fig = _figure("strain-per-cycle", "Strain γ at the start of each cycle", "cycle N", "γ")
-        fig.scatter("cycle", "gamma", source=self.sources["cycles"], size=6)
-        fig.line("cycle", "gamma", source=self.sources["fit"], color="#d62728", line_width=2)
-        return fig
-
-    def _line_figure(self, name, title, x_label, y_label, column):
-        fig = _figure(name, title, x_label, y_label)
-        fig.line("t", column, source=self.sources["time"])
-        return fig
-
-    def _q_gamma_figure(self):
-        fig = _figure("q-gamma", "Load q against strain γ", "γ", "q")
-        fig.line("gamma", "q", source=self.sources["time"])
-        return fig
-
-    def _energy_figure(self):
-        fig = _figure("energy", "Energy budget", "t", "energy")
-        for key, color in (("kinetic", "#1f77b4"), ("stored", "#2ca02c"), ("dissipated", "#d62728"),
-                           ("balance", "#000000")):
-            fig.line("t", key, source=self.sources["time"], color=color, legend_label=key)
-        fig.legend.location = "top_left"
-        return fig
-
-    def _cone_figure(self, name, title, key):
-        fig = _figure(name, title, "F_n", "F_t")
-        fig.scatter("normal", "tangential", source=self.sources[key], color="color", size=3)
-        fig.line("x", "y", source=self.sources["cone"], color="#555555", line_dash="dashed")
-        return fig
-
-    def _springs_figure(self):
-        fig = _figure("springs", "Tangential spring D_t of the three models", "t", "D_t")
-        for key, color, label in (("dt_cundall_strack", "#d62728", "Cundall-Strack"),
-                                  ("dt_alpha", "#1f77b4", "alpha-corrected"), ("dt_angle", "#2ca02c", "angle")):
-            fig.line("t", key, source=self.sources["springs"], color=color, legend_label=label)
-        fig.legend.location = "top_left"
-        return fig
-
-    def _spring_path_figure(self):
-        fig = _figure("spring-path", "(D_t, D_n) along the path", "D_t", "D_n")
-        fig.line("dt_cundall_strack", "dn_cundall_strack", source=self.sources["springs"], color="#d62728")
-        fig.line("dt_angle", "dn_angle", source=self.sources["springs"], color="#2ca02c")
-        return fig
-
-    def _block_load_figure(self):
-        fig = _figure("block-load", "Load / μF_n and velocity", "t", "")
-        fig.line("t", "load_ratio", source=self.sources["block"], legend_label="load / μF_n")
-        fig.line("t", "velocity", source=self.sources["block"], color="#d62728", legend_label="velocity")
-        fig.add_layout(Span(location=1.0, dimension="width", line_dash="dotted"))
-        return fig
-
-    def _replay_figure(self):
-        fig = _figure("replay-energy", "Energy budget of the replayed run", "t", "energy")
-        for key, color in (("kinetic", "#1f77b4"), ("stored", "#2ca02c"), ("balance", "#000000")):
-            fig.line("t", key, source=self.sources["replay"], color=color, legend_label=key)
-        return fig
+    def _show_pane(self) -> None:
+        choice = self.pane_choice.value
+        plots = self.shown
+        keys = [p for p in plots if p.name in self.key_names] or plots[:2]
+        if choice == "Key plots":
+            self.right.objects = [self.pane_choice] + [p.pane for p in keys]
+        elif choice == "More plots":
+            others = [p.pane for p in plots if p not in keys]
+            self.right.objects = [self.pane_choice] + (others or [pn.pane.Markdown("*This preset has no other plots.*")])
+        elif choice == "About this preset":
+            self.right.objects = [self.pane_choice, self.about]
+        else:
+            self.right.objects = [self.pane_choice, self.analysis_view]
 
     # ------------------------------------------------------------------ the Analysis tab
     def _build_analysis(self):
         self.analysis_kind = pn.widgets.Select(name="Analysis", options=list(ANALYSES), value="status",
-                                               css_classes=["analysis-select"])
+                                               css_classes=["analysis-select"], width=160)
         self.analysis_button = pn.widgets.Button(name="Analyse the current state", button_type="primary",
-                                                 css_classes=["analysis-button"])
+                                                 css_classes=["analysis-button"], margin=(24, 10, 5, 10))
         self.analysis_button.on_click(lambda e: self._command("analyze", kind=self.analysis_kind.value))
-        self.analysis_text = pn.pane.Markdown(
-            "Pick an analysis and press the button: it runs on the state of that moment, on its own thread. "
-            "*status* draws the force network coloured by the consistent status (blue non-sliding, red sliding; "
-            "critical contacts marked, red where the dynamics disagrees); *stiffness* draws the mechanism as "
-            "green arrows in the 3D scene; *packing* the (N, T) scatter with the lines T = ±√3 N; *fractal* "
-            "I(k) with its fit.", css_classes=["analysis-summary"], sizing_mode="stretch_width")
+        self.analysis_text = pn.pane.HTML(
+            "<p>Pick an analysis and press the button: it runs on the state of that moment, on its own thread, "
+            "while the simulation goes on. <i>status</i>: the critical contacts and the consistent state by "
+            "minimum sliding, drawn as a force network; <i>stiffness</i>: the mechanism, as green arrows in the "
+            "3D scene; <i>rigidity</i>: Gilabert's counts; <i>packing</i>: Φ, z, forces, with the (N, T) scatter; "
+            "<i>fractal</i>: I(k) and its fit.</p>", css_classes=["analysis-summary"], sizing_mode="stretch_width")
         self.analysis_sources = {name: ColumnDataSource(columns, name=f"analysis-{name}") for name, columns in (
             ("segments", {"x0": [], "y0": [], "x1": [], "y1": [], "color": []}),
             ("critical", {"x": [], "y": [], "color": []}), ("forces", {"normal": [], "tangential": []}),
             ("lines", {"xs": [], "ys": []}), ("data", {"k": [], "intensity": []}), ("fit", {"k": [], "fitted": []}))}
         src = self.analysis_sources
-        network = _figure("analysis-network", "Force network by consistent status", "x", "y", match_aspect=True)
+        network = lab_figure("analysis-network", "Contacts by the status minimum sliding gives", "x", "y",
+                             match_aspect=True, aspect_scale=1.0)
         network.segment("x0", "y0", "x1", "y1", color="color", source=src["segments"], line_width=1.5)
-        network.scatter("x", "y", color="color", source=src["critical"], size=7, marker="diamond")
-        forces = _figure("analysis-forces", "Contact forces (N, T), lines T = ±√3 N", "N", "T")
-        forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5)
-        forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed")
-        structure = _figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k", "I(k)",
-                            x_axis_type="log", y_axis_type="log")
-        structure.scatter("k", "intensity", source=src["data"], size=4)
-        structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2)
-        return pn.Column(pn.Row(self.analysis_kind, self.analysis_button), self.analysis_text,
-                         *(pn.pane.Bokeh(fig, sizing_mode="stretch_width") for fig in (network, forces, structure)),
-                         sizing_mode="stretch_width", visible=False)
-
-    def _show_tab(self, event) -> None:
-        """The two tabs below the scene (pn.Tabs would fetch its stylesheets from a CDN)."""
-        self.plots.visible = event.new == "Plots"
-        self.analysis_view.visible = event.new == "Analysis"
+        network.scatter("x", "y", color="color", source=src["critical"], size=8, marker="diamond")
+        for color, text, glyph in (("#1f77b4", "non-sliding", "line"), ("#d62728", "sliding", "line"),
+                                   ("#ff7f0e", "critical, as the dynamics has it", "diamond"),
+                                   ("#d62728", "critical, the dynamics disagrees", "diamond")):
+            nowhere = np.array([np.nan])
+            if glyph == "line":
+                network.line(nowhere, nowhere, color=color, line_width=2, legend_label=text)
+            else:
+                network.scatter(nowhere, nowhere, color=color, marker="diamond", size=8, legend_label=text)
+        legend_above(network, columns=2)
+        forces = lab_figure("analysis-forces", "Interaction forces (N, T) (Gilabert Fig. 14)", "N (paper units)",
+                            "T (paper units)")
+        forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5, legend_label="an interaction")
+        forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed",
+                          legend_label="T = ±√3 N")
+        legend_above(forces)
+        structure = lab_figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k (1/length)",
+                               "I(k) (Eq. 25)", x_axis_type="log", y_axis_type="log")
+        structure.scatter("k", "intensity", source=src["data"], size=4, legend_label="I(k) of the state")
+        structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2, legend_label="fit of Eq. 28")
+        legend_above(structure)
+        self.analysis_figures = {name: pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=320, visible=False)
+                                 for name, fig in (("network", network), ("forces", forces), ("structure", structure))}
+        return pn.Column(pn.Row(self.analysis_kind, self.analysis_button), self._note_pane("analysis"),
+                         self.analysis_text, *self.analysis_figures.values(), sizing_mode="stretch_both", scroll=True)
 
     def _update_analysis(self) -> None:
         result = self.engine.analysis.latest()
@@ -345,137 +297,216 @@ class Dashboard:
             return
         self._analysis_seen = result.seq
         self.analysis_text.object = analysis.summary(result)
+        figures = result.report.figures if result.report is not None else ()
+        for name, pane in self.analysis_figures.items():
+            pane.visible = pane.object.visible = name in figures
         if result.report is None:
             return
-        kind, src = result.kind, self.analysis_sources
-        if kind == "status":
+        src = self.analysis_sources
+        if "network" in figures:
             for name, columns in analysis.network_segments(result).items():
                 src[name].data = columns
-        elif kind == "packing" and result.state.forces_known:
+        if "forces" in figures:
             for name, columns in analysis.force_scatter(result).items():
                 src["forces" if name == "points" else "lines"].data = columns
-        elif kind == "fractal":
+        if "structure" in figures:
             for name, columns in analysis.structure_curve(result).items():
                 src[name].data = columns
-        elif kind == "stiffness":
-            self.scene.show_arrows(analysis.mechanism_arrows(result), float(result.state.radii.mean()))
+        self.scene.show_arrows(analysis.mechanism_arrows(result) if "mechanism" in figures else np.zeros((0, 2, 2)),
+                               float(result.state.radii.mean()))
 
     # ------------------------------------------------------------------ the periodic pull
     def _refresh(self) -> None:
         status = self.engine.status()
         preset = status.get("preset", "")
+        replay = status.get("replay")
+        shown_as = (replay or {}).get("of") if replay else preset
         if preset != self.preset_shown:
             self.preset_shown = preset
-            series = list(PRESETS[preset].series) if preset in PRESETS else ["replay"]
-            self._build_plots(preset, series)
-            self.teaching.object = teaching_text(preset) if preset in PRESETS else \
-                f"## {status.get('title', 'Replay')}\nA saved run played back frame by frame."
-            self._sync(status)
-        self.play.name = "Pause" if status.get("state") == "running" else "Play"
-        self.status_line.object = (f"**{status.get('title', '')}** — {status.get('stage', '')}; "
-                                   f"t = {status.get('time', 0):.4g}, step {status.get('step', 0)}, "
-                                   f"{status.get('steps_per_s', 0):.0f} steps/s, "
-                                   f"{status.get('particles', 0)} disks, state: {status.get('state', '')}")
-        cursor, reset, columns = self.engine.messages.since(self.message_cursor)
-        self.message_cursor = cursor
-        if columns.get("level"):
-            self._show(columns["level"][-1], columns["text"][-1])
-        elif status.get("error") and not self.alert.visible:
-            self._show("error", status["error"])
-        for key, source in self.sources.items():
-            if key in ("fit", "cone"):
-                continue
-            self.cursors[key], reset, columns = self.engine.series(key, self.cursors[key])
-            if key in ("contacts", "block") and "status" in columns:
-                columns["color"] = [STATUS_COLORS.get(int(s), "#000000") for s in columns["status"]]
-                if key == "contacts":
-                    f0 = float((status.get("settings") or {}).get("cohesion_force", 0.0))
-                    columns["normal"] = [n - f0 for n in columns["normal"]]
-            columns = {name: values for name, values in columns.items() if name in source.data}
-            if reset:
-                source.data = columns
-            elif columns and len(next(iter(columns.values()))):
-                source.stream(columns, rollover=ROLLOVER)
-        self._update_fit()
-        self._update_cone(status)
+            self._new_source(status, shown_as)
+        self._pull(status)
+        self._expire_notes()
+        self._messages(status)
+        self._show_status(status, shown_as)
         self._update_analysis()
         self.load_name.options = self.engine.saved_files()
 
+    def _new_source(self, status: dict, shown_as: str | None) -> None:
+        """A new preset or replay: its plots, its text, its settings in the widgets."""
+        cls = PRESETS.get(shown_as)
+        if cls is None:
+            self.key_names = ["replay-energy"]
+            self._use_plots(self.key_names, "t", {})
+            self.teaching.object = f"## {status.get('title', 'Replay')}\nA saved run played back frame by frame."
+        else:
+            self.key_names = list(cls.key_plots)
+            self._use_plots(list(cls.plots), cls.time_label, cls.series, getattr(cls, "reference_cycle", 0))
+            self.teaching.object = teaching_text(shown_as)
+        self.pane_choice.value = PANES[0]
+        self._show_pane()
+        self._sync(status)
+        self._legend_key = None
+
+    def _pull(self, status: dict) -> None:
+        for series, cursor in list(self.cursors.items()):
+            self.cursors[series], reset, columns = self.engine.series(series, cursor)
+            if not reset and not (columns and len(next(iter(columns.values())))):
+                continue
+            for plot in self.shown:
+                if series in plot.reads:
+                    plot.feed(series, columns, reset, status)
+        for plot in self.shown:
+            plot.refresh(status)
+
+    def _messages(self, status: dict) -> None:
+        """Each new message next to the control that caused it; a refused setting goes back to
+        the value in effect."""
+        for message in self.engine.messages.since(self.message_seq):
+            self.message_seq = message.seq
+            self._note(message.control, message.level, message.text)
+            if message.level == "error" and message.control in CONTROL_LABELS:
+                self._sync(status)
+
+    def _show_status(self, status: dict, shown_as: str | None) -> None:
+        state = status.get("state", "")
+        self.play.name = "Pause" if state == "running" else "Play"
+        if state == "error" and not self.notes["run"].visible:
+            self._note("run", "error", status.get("error", ""))
+        cls = PRESETS.get(shown_as)
+        unit = status.get("clock_unit", "")
+        self.speed.name = f"Speed ({unit}s per second)" if unit else "Speed"
+        readout = status.get("readout") or {}
+        fit = status.get("strain") or {}
+        parts = [f"<b>{status.get('stage', '')}</b>", f"t = {compact(status.get('time', 0.0))}"]
+        if "cycle" in status:
+            parts.append(f"cycle {status['cycle']}")
+        if fit:
+            parts.append(f"Δγ/cycle = {compact(fit.get('dgamma'))}")
+        shown = {"phi": lambda v: f"Φ = {v:.3f}", "z": lambda v: f"z = {v:.2f}",
+                 "sliding": lambda v: f"sliding contacts: {v}", "loops": lambda v: f"loop {v}",
+                 "load": lambda v: f"load = {v:.2f} μF_n"}
+        parts += [shown[key](value) for key, value in readout.items() if key in shown]
+        achieved = status.get("speed_achieved", 0.0)
+        parts.append(f"{achieved:.2g} {unit}s/s" if state == "running" and unit else state)
+        if state == "running":
+            parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
+        self.readout.object = ("<div style='font-size:13px;line-height:1.35;padding-top:4px'>" +
+                               " · ".join(p for p in parts if p) + "</div>")
+        scene = self.scene.state()
+        key = (self.scene.color_field, tuple(status.get("watched_labels") or ()), scene.get("walls", 0) > 0,
+               scene.get("cell") is not None, scene.get("mechanism", False))
+        if key != self._legend_key:
+            self._legend_key = key
+            self.legend.object = legend_html(self.scene.color_field, list(key[1]), *key[2:])
+        self._show_replay(status)
+
+    def _show_replay(self, status: dict) -> None:
+        replay = status.get("replay")
+        self.timeline_row.visible = replay is not None
+        if replay is None:
+            return
+        frame, frames = replay["frame"], replay["frames"]
+        if (frame, frames) != self._replay_shown:
+            self._replay_shown = (frame, frames)
+            self._syncing = True
+            try:
+                if self.timeline.end != max(1, frames - 1):
+                    self.timeline.end = max(1, frames - 1)
+                self.timeline.value = frame
+            finally:
+                self._syncing = False
+            self.timeline_label.object = (f"<div style='font-size:13px;padding-top:18px'>frame {frame + 1} of "
+                                          f"{frames}, t = {compact(status.get('time', 0.0))}</div>")
+            self._sync(status)
+
     def _sync(self, status: dict) -> None:
-        """Show the settings of a new preset in the widgets (without sending them back). During a
-        replay the preset list shows "Replay", so that choosing any preset leaves the replay."""
+        """Show the settings in effect (or those of the replayed frame) in the widgets, without
+        sending them back; show only the controls the preset uses."""
         self._syncing = True
         try:
-            self._sync_preset(status)
+            self._sync_widgets(status)
         finally:
             self._syncing = False
 
-    def _sync_preset(self, status: dict) -> None:
+    def _sync_widgets(self, status: dict) -> None:
         settings = status.get("settings")
-        if status["preset"] not in PRESETS or not settings:
+        replay = status.get("replay")
+        if replay is not None:
             self.preset.options = {**PRESET_OPTIONS, status.get("title", "Replay"): REPLAY}
             self.preset.value = REPLAY
-            for widget, _ in self.settings_widgets:
-                widget.disabled = True
-            return
-        self.preset.options = PRESET_OPTIONS
-        self.preset.value = status["preset"]
-        enabled = set(PRESETS[status["preset"]].controls) | {"steps_per_frame"}
+        else:
+            self.preset.options = PRESET_OPTIONS
+            self.preset.value = status["preset"]
+        speed = status.get("speed") if replay is not None else (settings or {}).get("speed")
+        if speed is not None:
+            self.speed.value = SPEEDS[_speed_label(speed)]
+        cls = PRESETS.get(replay["of"] if replay else status["preset"])
+        used = set(cls.controls) if cls else set()
         for widget, key in self.settings_widgets:
-            widget.disabled = key not in enabled
+            widget.visible = key in used
+            widget.disabled = replay is not None
+            if not settings or key not in settings:
+                continue
+            value = settings[key]
+            infinite = isinstance(value, str) and value == "inf"
             if widget is self.no_sliding:
-                widget.value = isinstance(settings[key], str) or math.isinf(float(settings[key]))
+                widget.value = infinite or (not isinstance(value, str) and math.isinf(value))
             elif widget is self.friction:
-                widget.value = 0.2 if isinstance(settings[key], str) or math.isinf(settings[key]) else settings[key]
+                widget.value = 0.2 if infinite or math.isinf(value) else float(value)
             else:
-                widget.value = settings[key]
-
-    def _update_fit(self) -> None:
-        source = self.sources.get("cycles")
-        if source is None:
-            return
-        cycles = np.asarray(source.data["cycle"], dtype=float)
-        gamma = np.asarray(source.data["gamma"], dtype=float)
-        start = 30 if cycles.size and cycles.max() >= 40 else 5
-        use = cycles >= start
-        if use.sum() < 3:
-            return
-        slope, intercept = np.polyfit(cycles[use], gamma[use], 1)
-        x = np.array([cycles[use].min(), cycles[use].max()])
-        self.sources["fit"].data = {"cycle": x, "gamma": slope * x + intercept}
-        rms = float(np.sqrt(np.mean((gamma[use] - slope * cycles[use] - intercept) ** 2)))
-        verdict = "ratcheting" if rms < abs(slope) else "no clear ratcheting"
-        self._panes["strain-per-cycle"].object.title.text = f"Strain γ per cycle: Δγ = {slope:.3g} per cycle ({verdict}, from cycle {start})"
-
-    def _update_cone(self, status: dict) -> None:
-        source = self.sources.get("cone")
-        if source is None:
-            return
-        settings = status.get("settings") or {}
-        friction = settings.get("friction", 0.5)
-        mu = math.inf if isinstance(friction, str) else float(friction)
-        data = self.sources.get("contacts") or self.sources.get("block")
-        top = max([1e-12] + [abs(v) for v in data.data.get("normal", [])])
-        f0 = float(settings.get("cohesion_force", 0.0))
-        if math.isinf(mu):
-            source.data = {"x": [], "y": []}
-            return
-        xs = [top, -f0, top]
-        source.data = {"x": xs, "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
+                widget.value = value
+        self.apply_reset.visible = "particles" in used
+        for group, keys in self.groups.items():
+            group.visible = bool(used & keys)
+        self.no_controls.visible = not used
 
     # ------------------------------------------------------------------ layout
     def view(self):
-        controls = pn.Column(
-            self.preset, pn.Row(self.play, self.step, self.reset), self.alert,
-            pn.pane.Markdown("**Loading**"), self.phase, self.amplitude, self.pressure, self.period,
-            pn.pane.Markdown("**Contacts**"), self.friction, self.no_sliding, self.model, self.damping,
-            self.rolling_friction, self.rolling_stiffness, self.cohesion_force, self.cohesion_range,
-            pn.pane.Markdown("**Sample**"), self.particles, self.seed, self.apply_reset, self.speed,
-            pn.pane.Markdown("**View**"), self.color, self.watch, self.watch_button,
-            pn.pane.Markdown("**Files**"), self.save_name, self.save, self.load_name, self.load,
-            width=300)
-        main = pn.Column(self.status_line, pn.Row(self.scene_pane, self.teaching), self.tab_choice, self.plots,
-                         self.analysis_view, sizing_mode="stretch_width")
-        page = pn.Row(controls, main, sizing_mode="stretch_width")
         pn.state.add_periodic_callback(self._refresh, period=200)
-        return page
+        return self.page
+
+    def _layout(self):
+        def labelled(widget, key):
+            return [widget, self._note_pane(key)]
+
+        loading = pn.Column(pn.pane.HTML("<b>Loading</b>"), *labelled(self.phase, "phase"),
+                            *labelled(self.amplitude, "amplitude"), *labelled(self.pressure, "pressure"),
+                            *labelled(self.period, "period"), sizing_mode="stretch_width")
+        contacts = pn.Column(pn.pane.HTML("<b>Contacts</b>"), self.friction, *labelled(self.no_sliding, "friction"),
+                             *labelled(self.model, "tangential_model"), *labelled(self.damping, "damping_ratio"),
+                             *labelled(self.rolling_friction, "rolling_friction"),
+                             *labelled(self.rolling_stiffness, "rolling_stiffness"),
+                             *labelled(self.cohesion_force, "cohesion_force"),
+                             *labelled(self.cohesion_range, "cohesion_range"), sizing_mode="stretch_width")
+        sample = pn.Column(pn.pane.HTML("<b>Sample</b>"), *labelled(self.particles, "particles"),
+                           *labelled(self.seed, "seed"), self.apply_reset, sizing_mode="stretch_width")
+        self.groups = {loading: {"phase", "amplitude", "pressure", "period"},
+                       contacts: {"friction", "tangential_model", "damping_ratio", "rolling_friction",
+                                  "rolling_stiffness", "cohesion_force", "cohesion_range"},
+                       sample: {"particles", "seed"}}
+        self.no_controls = pn.pane.HTML("<i>This preset has no live controls: only its speed.</i>",
+                                        sizing_mode="stretch_width")
+        view = pn.Column(pn.pane.HTML("<b>View</b>"), self.color, self.watch, self.watch_button,
+                         self._note_pane("watch"), sizing_mode="stretch_width")
+        files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"), self.save_name, self.save,
+                          self._note_pane("save"), self.load_name, self.load, self._note_pane("load"),
+                          self.record_name, self.record_seconds, self.record, self._note_pane("record"),
+                          sizing_mode="stretch_width")
+        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, width=250,
+                            sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
+        header = pn.Row(pn.pane.HTML("<div style='font-size:22px;font-weight:bold;padding-top:8px'>GranLab</div>",
+                                     width=105),
+                        self.preset, self.play, self.step, self.reset, self.speed, self.readout,
+                        height=HEADER_HEIGHT, sizing_mode="stretch_width")
+        # one line of fixed height: a message appearing or expiring never moves the page below it
+        messages = pn.Row(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"), height=24,
+                          sizing_mode="stretch_width", styles={"border-bottom": "1px solid #ddd", "overflow": "hidden"},
+                          margin=0)
+        self.timeline_label = pn.pane.HTML("", width=220)
+        self.timeline_row = pn.Row(self.timeline, self.timeline_label, self._note_pane("replay"),
+                                   sizing_mode="stretch_width", visible=False, css_classes=["timeline"])
+        # at least 600 px: narrower, viser lays its control panel over the scene as a bottom sheet
+        centre = pn.Column(self.scene_pane, self.legend, self.timeline_row, sizing_mode="stretch_both", min_width=600,
+                           styles={"flex": "1.25 1 0"})
+        body = pn.Row(sidebar, centre, self.right, sizing_mode="stretch_both")
+        return pn.Column(header, messages, body, sizing_mode="stretch_both")

@@ -44,8 +44,8 @@ WATCHED_COLORS = np.array(
 """Colour of the k-th watched contact (cycled): the same in the scene and in the Coulomb-cone
 plot, so a path on the plot can be found in the packing. None of them is a contact kind's."""
 
-STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("sliding, F_t = +μ(F_n+F0)", "#f59b00"),
-                 STATUS_SLIDE_NEG: ("sliding, F_t = −μ(F_n+F0)", "#b35a00"),
+STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("slides on the +μ side", "#f59b00"),
+                 STATUS_SLIDE_NEG: ("slides on the −μ side", "#b35a00"),
                  STATUS_COHESIVE: ("attracted at a distance", "#1e5adc")}
 """Name and colour of each contact status in the plots of watched contacts."""
 
@@ -214,3 +214,45 @@ def cell_outline(cell: tuple[float, float]) -> np.ndarray:
 def hex_color(rgb) -> str:
     """``#rrggbb`` of an sRGB triple."""
     return "#{:02x}{:02x}{:02x}".format(*(int(c) for c in rgb))
+
+
+def _swatch(color: str, text: str, line: bool = False) -> str:
+    shape = "width:18px;height:5px;border-radius:2px" if line else "width:12px;height:12px;border-radius:50%"
+    return (f'<span style="display:inline-flex;align-items:center;margin-right:10px;white-space:nowrap">'
+            f'<span style="display:inline-block;{shape};background:{color};margin-right:4px"></span>{text}</span>')
+
+
+def _gradient(table: np.ndarray, left: str, right: str) -> str:
+    stops = ", ".join(hex_color(c) for c in table[:: max(1, len(table) // 12)])
+    return (f'<span style="display:inline-flex;align-items:center;margin-right:10px">{left}'
+            f'<span style="display:inline-block;width:90px;height:10px;margin:0 4px;'
+            f'background:linear-gradient(to right, {stops})"></span>{right}</span>')
+
+
+DISK_LEGENDS = {
+    "rotation": lambda: "disk colour = rotation angle θ: " + _gradient(ROTATION_LUT, "0", "2π (cyclic)"),
+    "coordination": lambda: "disk colour = contacts z: " + "".join(
+        _swatch(hex_color(c), f"{k}{'+' if k == len(COORDINATION_COLORS) - 1 else ''}")
+        for k, c in enumerate(COORDINATION_COLORS)),
+    "pressure": lambda: "disk colour = pressure on the disk: " + _gradient(PRESSURE_LUT, "0", "its largest"),
+    "sliding": lambda: "disk colour: " + _swatch(hex_color(SLIDING_DISK_COLORS[0]), "no sliding contact")
+    + _swatch(hex_color(SLIDING_DISK_COLORS[1]), "a contact sliding"),
+}
+
+
+def legend_html(color_field: str, watched_labels: list[str], walls: bool, cell: bool, mechanism: bool = False) -> str:
+    """The legend of the 3D scene: what the disk colours, the spokes, the force lines (kind and
+    width), the watched contacts, the boundary and the mechanism arrows mean."""
+    forces = "".join(_swatch(hex_color(color), name, line=True) for name, color in CONTACT_KINDS)
+    watched = "".join(_swatch(hex_color(WATCHED_COLORS[k % len(WATCHED_COLORS)]), label, line=True)
+                      for k, label in enumerate(watched_labels))
+    boundary = (_swatch(hex_color(WALL_COLOR), "walls", line=True) if walls else "") + \
+        (_swatch(hex_color(CELL_COLOR), "periodic cell", line=True) if cell else "")
+    rows = [DISK_LEGENDS[color_field]() + _swatch(hex_color(SPOKE_COLOR), "spoke: the disk's rotation", line=True),
+            "force network: " + forces + "line width ∝ |F| " + boundary]
+    if watched:
+        rows.append("watched contacts (as in the Coulomb-cone plot): " + watched)
+    if mechanism:
+        rows.append(_swatch(hex_color(MECHANISM_COLOR), "arrows: the mechanism the stiffness analysis found "
+                                                        "(where the disks were then)", line=True))
+    return "<div class='scene-legend' style='font-size:12px;line-height:1.7'>" + "<br>".join(rows) + "</div>"

@@ -3,23 +3,28 @@
 Controls reach it through a command queue, applied between steps. It publishes
 
 - the latest scene frame (a copy, under a lock, with a sequence number),
-- time series in ring buffers with sequence numbers (each browser tab pulls what it has
-  not seen),
-- messages (errors, confirmations) in a buffer of their own,
+- time series in ring buffers with sequence numbers, recorded by the preset at its sample
+  times in simulated time (each browser tab pulls what it has not seen),
+- messages (errors, confirmations), each naming the control that caused it,
 - a status dictionary (``GET /status``).
 
-The thread runs its kernels on one numba thread: a single-threaded kernel never asks for the
-GIL, so the UI's event loops cannot stall it, and it leaves the other core to them.
+The simulation runs at the speed the user chose, in the preset's clock units (load cycles,
+loops, T_0) per second of wall clock, or as fast as it can. The thread runs its kernels on one
+numba thread: a single-threaded kernel never asks for the GIL, so the UI's event loops cannot
+stall it, and it leaves the other core to them.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
+import math
 import queue
 import re
 import threading
 import time
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numba
@@ -30,35 +35,46 @@ from engine.analysis.states import PackingState, read_state
 from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io import h5md
 from engine.io.jsonsafe import jsonable
-from engine.protocols.presets import PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset, preset_settings
+from engine.params import positive
+from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset,
+                                      pair_label, preset_settings)
 
 from .analysis import AnalysisResult, AnalysisRunner
-from .buffers import Cursor, SeriesBuffer
-from .frames import FrameData, build_frame
+from .buffers import Cursor, MessageLog, SeriesBuffer
 from .drawing import SceneFrame
+from .frames import FrameData, build_frame
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_BYTES = 64 * 2 ** 20
 CHUNK_SECONDS = 0.02
+SERIES_CAPACITY = {"contacts": 60000, "time": 40000, "block": 40000, "springs": 40000, "cycles": 100000,
+                   "replay": 100000}
+"""Rows each series keeps (a tab that falls further behind gets the newest ones)."""
+MOVIE_SUFFIXES = (".gif", ".mp4")
 
 
-def safe_path(data_dir: Path, name: str) -> Path:
+def safe_path(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
     """The file ``name`` inside ``data_dir``: a plain name (letters, digits, ``._-``), no folders.
 
-    ``.h5`` is added when there is no suffix. Anything else raises a ParameterError."""
+    ``suffix`` is added when there is none. Anything else raises a ParameterError."""
     if not isinstance(name, str) or not FILE_NAME.match(name) or ".." in name:
         raise ParameterError("file name", name, "a plain name of letters, digits, '.', '_' or '-' (no folders, "
                                                 "no '..', no absolute path), inside the lab's data folder")
     path = data_dir / name
     if not path.suffix:
-        path = path.with_suffix(".h5")
+        path = path.with_suffix(suffix)
     if path.resolve().parent != data_dir.resolve():
         raise ParameterError("file name", name, "a file inside the lab's data folder")
     return path
 
 
+def settings_json(settings: LabSettings) -> str:
+    return json.dumps(jsonable(dataclasses.asdict(settings)))
+
+
 class Replay:
-    """Frames of a run file played back in a loop, with the series it recorded."""
+    """A run file played back on a timeline: its frames, and the lab's series up to the frame
+    shown (a lab run holds them, with the settings of each frame; any run file has its energy)."""
 
     title = "Replay"
     controls: tuple[str, ...] = ()
@@ -74,37 +90,59 @@ class Replay:
             walls = h5md.walls_from_json(params["walls_json"])
             self.normals = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
             self.frames = [h5md.read_frame(f, k) for k in range(self.count)]
-            fields = [x.decode() for x in f["observables/energy"].attrs["fields"]]
+            fields = tuple(x.decode() for x in f["observables/energy"].attrs["fields"])
             energy = f["observables/energy/value"][: self.count]
-        self.series = {"replay": ("t", "step") + tuple(fields)}
-        self.rows_ready = [(frame["time"], frame["step"], *map(float, energy[k])) for k, frame in enumerate(self.frames)]
+            lab = h5md.lab_series(f)
+        protocol = json.loads(params.get("protocol_json", "{}"))
+        self.times = np.array([frame["time"] for frame in self.frames])
+        self.of = protocol.get("lab_preset") if protocol.get("lab_preset") in PRESETS and lab else None
+        span = float(self.times[-1] - self.times[0])
+        self.clock_unit = protocol.get("clock_unit", "10 frames")
+        self.cycle_time = float(protocol.get("cycle_time", 10.0 * span / max(1, self.count - 1) or 1.0))
+        settings = self.settings(0) or {}
+        self.speed = float(settings.get("speed", 1.0)) if isinstance(settings.get("speed"), (int, float)) else 1.0
+        steps = np.array([frame["step"] for frame in self.frames], dtype=float)
+        self.series: dict[str, tuple[tuple[str, ...], np.ndarray]] = {
+            "replay": (("t", "step") + fields, np.column_stack([self.times, steps, energy]))}
+        self.series.update(lab)
         self.index = 0
-        self.stage = f"frame 1 of {self.count}"
+
+    def settings(self, index: int) -> dict | None:
+        text = self.frames[index].get("lab_settings_json")
+        return json.loads(text) if text else None
 
     def data(self) -> FrameData:
         return FrameData.from_run_frame(self.frames[self.index], self.normals)
 
-    def advance(self) -> None:
-        self.index = (self.index + 1) % self.count
-        self.stage = f"frame {self.index + 1} of {self.count}"
+    def rows(self, name: str, after: float, until: float) -> np.ndarray:
+        """Rows of series ``name`` with ``after < t <= until``."""
+        columns, rows = self.series[name]
+        t = rows[:, columns.index("t")]
+        return rows[(t > after) & (t <= until)]
 
     def status(self) -> dict:
         frame = self.frames[self.index]
-        return {"preset": self.name, "title": f"Replay of {self.path.name}", "stage": self.stage,
-                "time": frame["time"], "step": frame["step"], "particles": int(frame["position"].shape[0])}
+        return {"preset": self.name, "title": f"Replay of {self.path.name}",
+                "stage": f"frame {self.index + 1} of {self.count}", "time": frame["time"], "step": frame["step"],
+                "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
+                "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed,
+                "replay": {"of": self.of, "frame": self.index, "frames": self.count,
+                           "start": float(self.times[0]), "end": float(self.times[-1])}}
 
 
 class LabEngine:
-    """The simulation of one lab server and the thread that runs it."""
+    """The simulation of one lab server and the thread that runs it.
+
+    With ``wait_for_tab`` the preset is built and its kernels compiled, but it starts (at t = 0)
+    only when the first tab opens (command ``tab_opened``)."""
 
     def __init__(self, data_dir: str | Path, preset: str = "ratchet", frame_rate: float = 30.0,
-                 sample_rate: float = 20.0, **changes):
+                 wait_for_tab: bool = False, **changes):
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.frame_interval = 1.0 / frame_rate
-        self.sample_interval = 1.0 / sample_rate
         self.commands: queue.Queue = queue.Queue()
-        self.messages = SeriesBuffer(("level", "text"), capacity=200)
+        self.messages = MessageLog()
         self.buffers: dict[str, SeriesBuffer] = {}
         self._lock = threading.Lock()
         self._frame = None
@@ -112,19 +150,33 @@ class LabEngine:
         self._frame_taken = True
         self._frame_ready = threading.Event()
         self._status: dict = {}
-        self.running = True
+        self.waiting = wait_for_tab
+        self.running = not wait_for_tab
         self.error = ""
         self.tabs = 0
         self.command_ms = 0.0
         self.scene_fps = lambda: 0.0
         self._stop = threading.Event()
         self._history: deque = deque()
-        self._rate = deque()
+        self._rate: deque = deque()
+        self._anchor = (time.perf_counter(), 0.0)
         self._thread = threading.Thread(target=self._loop, name="granlab-engine", daemon=True)
         self.analysis = AnalysisRunner(on_done=self._analysis_done)
-        self.source: Preset | Replay = make_preset(preset, preset_settings(preset, **changes))
-        self._reset_buffers()
+        self._recorder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="granlab-record")
+        settings = preset_settings(preset, **changes)
+        if wait_for_tab:
+            self._warm_up(preset, settings)
+        self.source: Preset | Replay = make_preset(preset, settings)
+        self._switch(self.source)
         self._publish()
+
+    @staticmethod
+    def _warm_up(preset: str, settings: LabSettings) -> None:
+        """Compile (or load from the cache) the kernels a preset and its frames use, on a copy."""
+        warm = make_preset(preset, settings)
+        warm.advance(5)
+        view = warm.views()[0]
+        build_frame([(FrameData.from_simulation(view.sim), view.offset)], [warm.watched()])
 
     # ------------------------------------------------------------------ for the UI threads
     def start(self) -> None:
@@ -135,14 +187,16 @@ class LabEngine:
         self.submit("wake")
         self._thread.join(timeout=10)
         self.analysis.close()
+        self._recorder.shutdown(wait=True, cancel_futures=True)
 
     @property
     def alive(self) -> bool:
         return self._thread.is_alive()
 
     def submit(self, command: str, **payload) -> None:
-        """Queue a command (``apply``, ``preset``, ``reset``, ``play``, ``pause``, ``step``, ``watch``,
-        ``watch_disk``, ``save``, ``load``, ``analyze``); it never blocks. Its outcome arrives in :attr:`messages`."""
+        """Queue a command (``apply``, ``preset``, ``reset``, ``play``, ``pause``, ``step``, ``seek``,
+        ``watch``, ``watch_disk``, ``save``, ``load``, ``record``, ``analyze``, ``tab_opened``); it
+        never blocks. Its outcome arrives in :attr:`messages`."""
         self.commands.put((command, payload, time.perf_counter()))
 
     def frame(self, seen: int = -1, timeout: float = 0.0) -> tuple[int, SceneFrame | None]:
@@ -178,25 +232,19 @@ class LabEngine:
     # ------------------------------------------------------------------ the thread
     def _loop(self) -> None:
         numba.set_num_threads(1)
-        last_frame = last_sample = last_history = time.perf_counter()
+        last_publish = time.perf_counter()
         while not self._stop.is_set():
-            self._drain(block=not self.running)
-            if self.running:
-                self._step_once(chunked=True)
+            wait = self._run_chunk() if self.running else 0.05
+            self._drain(wait)
             now = time.perf_counter()
-            if now - last_sample >= self.sample_interval:
-                last_sample = now
-                self._sample()
-            if now - last_frame >= self.frame_interval:
-                last_frame = now
+            if now - last_publish >= self.frame_interval:
+                last_publish = now
                 self._publish(frame=self._frame_taken)
-            if now - last_history >= 1.0 and isinstance(self.source, Preset) and self.running:
-                last_history = now
-                self._remember()
 
-    def _drain(self, block: bool) -> None:
+    def _drain(self, wait: float) -> None:
+        """Execute the queued commands, waiting up to ``wait`` seconds for the first."""
         try:
-            command = self.commands.get(timeout=0.05) if block else self.commands.get_nowait()
+            command = self.commands.get(timeout=wait) if wait > 0 else self.commands.get_nowait()
         except queue.Empty:
             return
         while True:
@@ -207,40 +255,63 @@ class LabEngine:
                 return
 
     def _execute(self, command: str, payload: dict, submitted: float) -> None:
+        control = {"apply": next(iter(payload.get("changes", {})), ""), "watch": "watch", "watch_disk": "watch",
+                   "save": "save", "load": "load", "record": "record", "analyze": "analysis",
+                   "preset": "preset", "seek": "replay"}.get(command, "run")
         try:
             if command == "apply":
                 self._apply(payload["changes"])
             elif command == "preset":
                 self._switch(make_preset(payload["name"]))
-                self._info(f"preset: {self.source.title}")
+                self.running = not self.waiting
+                self._info(f"preset: {self.source.title}", "preset")
             elif command == "reset":
-                self._switch(make_preset(self._preset_name(), self._settings()))
-                self._info("reset")
-            elif command == "play":
+                name = self.source.of if isinstance(self.source, Replay) and self.source.of else self._preset_name()
+                self._switch(make_preset(name, self._settings() if isinstance(self.source, Preset) else None))
                 self.running = True
-                self.error = ""
+                self._info("preset restarted at t = 0", "run")
+            elif command == "tab_opened":
+                if self.waiting:
+                    self.waiting, self.running = False, True
+                    self._switch(make_preset(self._preset_name(), self._settings()))
+            elif command == "play":
+                self.running, self.error = True, ""
+                if isinstance(self.source, Replay) and self.source.index == self.source.count - 1:
+                    self._seek(0)
+                self._reanchor()
             elif command == "pause":
                 self.running = False
             elif command == "step":
                 self.running = False
                 self._step_once()
-                self._sample()
+            elif command == "seek":
+                self.running = False
+                self._seek(int(payload["index"]))
             elif command == "watch":
-                if isinstance(self.source, Preset):
-                    self.source.toggle_watch(tuple(payload["pair"]))
+                self._info(self._preset_only("watch").toggle_watch(tuple(payload["pair"])), "watch")
             elif command == "watch_disk":
-                if isinstance(self.source, Preset):
-                    self.source.watch_disk(int(payload["index"]))
+                self._info(self._preset_only("watch").watch_disk(int(payload["index"])), "watch")
             elif command == "save":
                 self._save(payload["name"])
             elif command == "load":
                 self._load(payload["name"])
+            elif command == "record":
+                self._record(payload["name"], float(payload["seconds"]))
             elif command == "analyze":
                 self._analyze(payload["kind"])
             self.command_ms = 1000.0 * (time.perf_counter() - submitted)
-            self._publish()
+        except ParameterError as error:
+            key = error.name if error.name in CONTROL_LABELS else control
+            label = CONTROL_LABELS.get(error.name, error.name)
+            self.messages.add("error", f"{label} = {_shown(error.value)} is not allowed: {error.allowed}", key)
         except (GranLabError, ValueError, OSError) as error:
-            self.messages.extend([("error", str(error))])
+            self.messages.add("error", str(error), control)
+        self._publish()
+
+    def _preset_only(self, what: str) -> Preset:
+        if not isinstance(self.source, Preset):
+            raise ParameterError(what, self.source.name, "a running preset (a replay shows a file as it was saved)")
+        return self.source
 
     def _preset_name(self) -> str:
         return self.source.name if isinstance(self.source, Preset) else "ratchet"
@@ -249,65 +320,145 @@ class LabEngine:
         return self.source.settings if isinstance(self.source, Preset) else None
 
     def _apply(self, changes: dict) -> None:
-        if not isinstance(self.source, Preset):
-            raise ParameterError("controls", sorted(changes), "a running preset (not a replay)")
-        if any(key in RESET_CONTROLS for key in changes):
-            settings = self.source.settings.replace(**changes)
-            self._switch(make_preset(self.source.name, settings))
-            self._info("applied: " + ", ".join(f"{k} = {v}" for k, v in changes.items()) + " (reset)")
+        if isinstance(self.source, Replay) and set(changes) == {"speed"}:
+            self.source.speed = positive("speed", changes["speed"], allow_inf=True)
+            self._reanchor()
+            self._info(f"replay speed: {_shown(self.source.speed)} {self.source.clock_unit} per second", "speed")
             return
-        self.source.apply(**changes)
-        self._info("applied: " + ", ".join(f"{k} = {v}" for k, v in changes.items()))
+        preset = self._preset_only("controls")
+        labels = ", ".join(f"{CONTROL_LABELS.get(k, k)} = {_shown(v)}" for k, v in changes.items())
+        key = next(iter(changes), "")
+        if any(k in RESET_CONTROLS for k in changes):
+            self._switch(make_preset(preset.name, preset.settings.replace(**changes)))
+            self.running = not self.waiting
+            self._info(f"applied: {labels} (restarted at t = 0)", key)
+            return
+        notes = preset.apply(**changes)
+        if "speed" in changes:
+            self._reanchor()
+        self._info(f"applied: {labels}" + (f" ({'; '.join(notes)})" if notes else ""), key)
 
     def _switch(self, source) -> None:
+        """Show ``source`` (a preset from its start, or a replay at its first frame)."""
         self.source = source
         self._history.clear()
         self.error = ""
         self._reset_buffers()
+        if isinstance(source, Preset):
+            source.on_frame = self._remember
+            self._remember()
+            self._collect()
+        else:
+            self._seek(0)
+        self._reanchor()
 
     def _reset_buffers(self) -> None:
-        series = self.source.series
+        series = dict(self.source.series) if isinstance(self.source, Preset) else \
+            {name: columns for name, (columns, _) in self.source.series.items()}
         for name, columns in series.items():
-            if name in self.buffers:
-                self.buffers[name].reset(columns)
-            else:
-                self.buffers[name] = SeriesBuffer(columns)
-        for name in list(self.buffers):
-            if name not in series:
-                self.buffers[name].reset()
-        if isinstance(self.source, Replay):
-            self.buffers["replay"].extend(self.source.rows_ready)
+            if name not in self.buffers:
+                self.buffers[name] = SeriesBuffer(columns, SERIES_CAPACITY.get(name, 40000))
+            self.buffers[name].reset(columns)
+        for name in self.buffers.keys() - series.keys():
+            self.buffers[name].reset()
 
-    def _step_once(self, chunked: bool = False) -> None:
-        """Advance ``steps_per_frame`` steps; while running (``chunked``) at most what takes
-        ``CHUNK_SECONDS`` at the measured rate, so that controls wait little and frames come
-        often however large the system."""
+    def _reanchor(self) -> None:
+        """Pace from now on: simulated time advances at the chosen speed from the current state."""
+        self._anchor = (time.perf_counter(), self._time())
+
+    def _time(self) -> float:
+        source = self.source
+        return float(source.times[source.index]) if isinstance(source, Replay) else source.sim.time
+
+    def _pace(self) -> float:
+        """Simulated time per second of wall clock (inf: as fast as possible)."""
         source = self.source
         if isinstance(source, Replay):
-            source.advance()
-            time.sleep(0.1)
-            return
-        steps = source.settings.steps_per_frame
+            return source.speed * source.cycle_time
+        return source.settings.speed * source.cycle_time()
+
+    def _run_chunk(self) -> float:
+        """Advance about ``CHUNK_SECONDS`` of work, no further than the paced target time;
+        returns how long the loop may wait for commands before the next chunk."""
+        pace = self._pace()
+        now = time.perf_counter()
+        if isinstance(self.source, Replay):
+            return self._play_replay(pace, now)
+        sim = self.source.sim
+        steps = self._chunk_steps()
+        if math.isfinite(pace):
+            wall0, sim0 = self._anchor
+            behind = sim0 + pace * (now - wall0) - sim.time
+            if behind <= 0.0:
+                return min(CHUNK_SECONDS, -behind / pace)
+            if behind > 0.5 * pace:  # cannot keep up: go on at full speed, do not sprint to catch up later
+                self._anchor = (now - 0.25, sim.time - 0.25 * pace)
+            steps = max(1, min(steps, math.ceil(behind / sim.dt)))
+        self._advance(steps)
+        return 0.0
+
+    def _chunk_steps(self) -> int:
         seconds = sum(r[3] for r in self._rate)
-        if chunked and seconds > 0.0:
-            steps = max(1, min(steps, int(CHUNK_SECONDS * sum(r[2] for r in self._rate) / seconds)))
+        if seconds <= 0.0:
+            return 10
+        return max(1, int(CHUNK_SECONDS * sum(r[2] for r in self._rate) / seconds))
+
+    def _advance(self, steps: int) -> None:
+        source = self.source
         start = time.perf_counter()
         try:
-            source.advance(steps)
+            done = source.advance(steps)
         except DivergenceError as error:
             self.running = False
-            self._error(f"{error} Paused: change a parameter or reset, then press play.")
+            self._error(f"{error} Paused: change a parameter or restart the preset, then press play.")
             return
-        self._rate.append((time.perf_counter(), steps * sum(v.sim.particles.count for v in source.views()),
-                           steps, time.perf_counter() - start))
-        while self._rate and self._rate[0][0] < time.perf_counter() - 2.0:
+        finally:
+            self._collect()
+        end = time.perf_counter()
+        self._rate.append((end, done * sum(v.sim.particles.count for v in source.views()), done, end - start,
+                           source.sim.time))
+        while self._rate and self._rate[0][0] < end - 2.0:
             self._rate.popleft()
 
-    def _sample(self) -> None:
-        if isinstance(self.source, Preset):
-            self.source.sample()
-            for name, rows in self.source.rows().items():
-                self.buffers[name].extend(rows)
+    def _step_once(self) -> None:
+        """One sample interval of the preset (a path sample), or the next frame of a replay."""
+        source = self.source
+        if isinstance(source, Replay):
+            self._seek(min(source.index + 1, source.count - 1))
+            return
+        self._advance(source.steps_to_next_sample())
+
+    def _collect(self) -> None:
+        """Move the rows the preset recorded into the buffers."""
+        for name, rows in self.source.rows().items():
+            self.buffers[name].extend(rows)
+
+    def _play_replay(self, pace: float, now: float) -> float:
+        source = self.source
+        wall0, sim0 = self._anchor
+        target = sim0 + pace * (now - wall0) if math.isfinite(pace) else math.inf
+        index = int(np.searchsorted(source.times, target, side="right")) - 1
+        index = min(max(index, source.index), source.count - 1)
+        if index == source.count - 1 and source.index == index:
+            self.running = False
+            return 0.05
+        if index > source.index:
+            self._seek(index)
+        return 0.01
+
+    def _seek(self, index: int) -> None:
+        """Show frame ``index`` of the replay, the series up to its time (forward: only the
+        rows in between are added)."""
+        source = self.source
+        if not 0 <= index < source.count:
+            raise ParameterError("replay frame", index, f"a frame 0 to {source.count - 1}")
+        previous, until = source.times[source.index], source.times[index]
+        forward = index > source.index and len(self.buffers["replay"]) > 0
+        for name in source.series:
+            if not forward:
+                self.buffers[name].reset()
+            self.buffers[name].extend(source.rows(name, previous if forward else -math.inf, until))
+        source.index = index
 
     def _publish(self, frame: bool = True) -> None:
         """Publish the status and, if ``frame``, a copy of what the scene draws (the arrays of
@@ -325,13 +476,19 @@ class LabEngine:
             sim = views[0].sim
             status = source.status()
             status.update(time=sim.time, step=sim.step, particles=sum(v.sim.particles.count for v in views),
-                          dt=sim.dt, watched=[list(p) for p in source.watched()])
+                          dt=sim.dt, watched=[list(p) for p in source.watched()],
+                          watched_labels=[pair_label(p, sim.particles.count, sim.walls.names) for p in source.watched()])
         seconds = sum(r[3] for r in self._rate)
-        status.update(state="error" if self.error else ("running" if self.running else "paused"), error=self.error,
+        span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
+        simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0
+        state = "error" if self.error else ("waiting" if self.waiting else ("running" if self.running else "paused"))
+        status.update(state=state, error=self.error,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
+                      speed_achieved=simulated / span / status["cycle_time"] if span > 0 and self.running else 0.0,
                       presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history),
-                      analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy)
+                      analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy,
+                      message_seq=self.messages.latest_seq)
         status = jsonable(status)
         with self._lock:
             self._status = status
@@ -342,32 +499,88 @@ class LabEngine:
                 self._frame_ready.set()
 
     def _remember(self) -> None:
+        """Keep a frame of the running preset (its first view) with the settings in effect
+        (called by the preset at its frame times), within ``HISTORY_BYTES``."""
         snap = self.source.views()[0].sim.snapshot()
         size = snap.positions.nbytes * 4 + snap.contacts.i.nbytes * 16
-        self._history.append(snap)
+        self._history.append((snap, settings_json(self.source.settings)))
         while len(self._history) > max(2, HISTORY_BYTES // max(1, size)):
             self._history.popleft()
 
     def _save(self, name: str) -> None:
-        if not isinstance(self.source, Preset):
-            raise ParameterError("save", self.source.name, "a running preset (a replay is already a file)")
+        preset = self._preset_only("save")
         path = safe_path(self.data_dir, name)
-        sim = self.source.views()[0].sim
-        snapshots = list(self._history) + [sim.snapshot()]
+        sim = preset.views()[0].sim
+        frames = list(self._history)
+        if frames[-1][0].step != sim.step:
+            frames.append((sim.snapshot(), settings_json(preset.settings)))
         partial = path.with_name(path.name + ".part")
-        with h5md.RunWriter(partial, sim, protocol={"lab_preset": self.source.name,
-                                                     "settings": dataclasses.asdict(self.source.settings)}) as writer:
-            for snap in snapshots:
-                writer.write_frame(snap)
+        protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
+                    "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time()}
+        with h5md.RunWriter(partial, sim, protocol=jsonable(protocol), lab_series=dict(preset.series)) as writer:
+            for snap, settings in frames:
+                writer.write_frame(snap, settings)
+            for name_, buffer in self.buffers.items():
+                if name_ in preset.series:
+                    writer.write_series(name_, buffer.array())
+            if "cycles" in preset.series:
+                self._write_cycles(writer, self.buffers["cycles"], sim)
             writer.write_checkpoint(sim)
         partial.replace(path)  # a file appears in the list only once complete
-        self._info(f"saved {len(snapshots)} frames to {path.name}")
+        self._info(f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) "
+                   f"to {path.name}", "save")
+
+    @staticmethod
+    def _write_cycles(writer: h5md.RunWriter, buffer: SeriesBuffer, sim) -> None:
+        """The cycle records of ``granlab info`` from the lab's cycle series (wall positions
+        rebuilt from the box lengths: the left and bottom walls do not move)."""
+        columns = buffer.columns
+        names = sim.walls.names
+        for row in buffer.array():
+            record = dict(zip(columns, row))
+            walls = np.array(sim.walls.offset, dtype=float)
+            if "right" in names and "top" in names:
+                walls[names.index("right")] = -record["length_x"] - walls[names.index("left")]
+                walls[names.index("top")] = -record["length_y"] - walls[names.index("bottom")]
+            writer.write_cycle_record(int(record["cycle"]), int(record["step"]), record["t"], record["length_x"],
+                                      record["length_y"], walls)
 
     def _load(self, name: str) -> None:
         path = safe_path(self.data_dir, name)
         self._switch(Replay(path))
         self.running = True
-        self._info(f"replaying {path.name} ({self.source.count} frames)")
+        self._info(f"replaying {path.name}: {self.source.count} frames, t = {self.source.times[0]:.4g} to "
+                   f"{self.source.times[-1]:.4g}", "load")
+
+    def _record(self, name: str, seconds: float) -> None:
+        """Render the kept frames of the last ``seconds`` of simulated time into a movie in the
+        data folder, on a thread of its own (rendering takes a while; the run goes on)."""
+        preset = self._preset_only("record")
+        path = safe_path(self.data_dir, name, suffix=".gif")
+        if path.suffix not in MOVIE_SUFFIXES:
+            raise ParameterError("movie name", name, "a name ending in " + " or ".join(MOVIE_SUFFIXES))
+        if not seconds > 0:
+            raise ParameterError("record seconds", seconds, "a length of simulated time > 0")
+        now = preset.sim.time
+        frames = [(FrameData.from_snapshot(snap), f"t = {snap.time:.4g}, step {snap.step}")
+                  for snap, _ in self._history if snap.time >= now - seconds]
+        if len(frames) < 2:
+            raise ParameterError("record seconds", seconds,
+                                 f"a span holding at least 2 kept frames (frames are kept every "
+                                 f"{preset.cycle_time() / preset.frames_per_cycle:.3g} of simulated time)")
+        self._recorder.submit(self._write_movie, path, frames)
+        self._info(f"recording {len(frames)} frames to {path.name}...", "record")
+
+    def _write_movie(self, path: Path, frames: list) -> None:
+        from .render import write_movie  # matplotlib takes a second to load: only when a movie is made
+
+        try:
+            partial = path.with_name(path.stem + ".part" + path.suffix)
+            count = write_movie(((build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames), partial)
+            partial.replace(path)
+            self._info(f"recorded {count} frames to {path.name}", "record")
+        except (GranLabError, ValueError, OSError) as error:
+            self.messages.add("error", f"recording {path.name} failed: {error}", "record")
 
     def _analyze(self, kind: str) -> None:
         """Hand the current state to the analysis thread: a snapshot of the running preset (its
@@ -379,19 +592,23 @@ class LabEngine:
         else:
             state = read_state(self.source.path, self.source.index)
         self.analysis.request(state, kind)
-        self._info(f"analysis: {kind} of the state at t = {state.time:.4g} started")
+        self._info(f"analysis: {kind} of the state at t = {state.time:.4g} started", "analysis")
 
     def _analysis_done(self, result: AnalysisResult) -> None:
         if result.error:
-            self.messages.extend([("error", f"analysis {result.kind}: {result.error}")])
+            self.messages.add("error", f"analysis {result.kind}: {result.error}", "analysis")
         else:
-            self._info(f"analysis: {result.kind} done in {result.report.timings['total']:.2f} s")
+            self._info(f"analysis: {result.kind} done in {result.report.timings['total']:.2f} s", "analysis")
 
-    def _info(self, text: str) -> None:
-        self.messages.extend([("info", text)])
+    def _info(self, text: str, control: str = "") -> None:
+        self.messages.add("info", text, control)
 
     def _error(self, text: str) -> None:
         """The run itself failed: the state shows the error until play, a reset or a new preset."""
         self.error = text
-        self.messages.extend([("error", text)])
+        self.messages.add("error", text, "run")
 
+
+def _shown(value) -> str:
+    """A value as the user typed it (no quotes around strings)."""
+    return value if isinstance(value, str) else f"{value:g}" if isinstance(value, float) else repr(value)

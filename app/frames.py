@@ -56,6 +56,15 @@ class FrameData:
 
 
     @classmethod
+    def from_snapshot(cls, snap) -> "FrameData":
+        """What a frame needs from a :class:`engine.simulation.Snapshot` (its arrays are copies
+        already: nothing is copied again)."""
+        c = snap.contacts
+        return cls(snap.positions, snap.radii, snap.angles, np.column_stack([c.i, c.j]), c.image, c.status,
+                   c.normal_force, c.tangential_force, c.surface_gap, snap.wall_normals, snap.wall_offsets,
+                   np.where(np.array(snap.periodic), snap.cell_lengths, 0.0))
+
+    @classmethod
     def from_run_frame(cls, frame: dict, wall_normal: np.ndarray) -> "FrameData":
         """What a frame needs from a run-file frame (:func:`engine.io.h5md.read_frame`), with the
         walls' normals ``(W, 2)`` (from the file's parameters; the offsets are per frame)."""

@@ -35,7 +35,7 @@ from typing import Callable
 import numpy as np
 import viser
 
-from .drawing import (CELL_COLOR, COLOR_FIELDS, COMPRESSIVE_COLOR, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR,
+from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR,
                       PALETTES, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, SceneFrame, cell_outline, color_index,
                       force_class_thickness, force_classes, frame_bounds)
 
@@ -60,6 +60,10 @@ faces show about a third brighter than their palette colours."""
 CAMERA_FOV = np.radians(30.0)
 """Vertical field of view of the initial camera (radians): narrow, so the
 perspective hardly distorts the 2D picture."""
+
+MIN_ASPECT = 0.75
+"""The narrowest view (width / height) the framing allows for: the lab's
+scene is about square, a little taller than wide at 1920 × 1080."""
 
 _ROOT = "/granlab"
 
@@ -164,6 +168,7 @@ class SceneView:
         self.frames_pushed = 0
 
         self._frame: SceneFrame | None = None
+        self._framed = (0.0, 0.0, 0.0)  # centre x, y and half-width of the square the camera shows
         self._disks: viser.BatchedMeshHandle | None = None
         self._disk_top = 0.0
         self._positions3 = np.zeros((0, 3), dtype=np.float32)
@@ -181,9 +186,17 @@ class SceneView:
         def lines(name: str, color: tuple[int, int, int]) -> viser.LineSegmentsHandle:
             return scene.add_line_segments(f"{_ROOT}/{name}", empty, color, visible=False)
 
+        def coloured_lines(name: str) -> viser.LineSegmentsHandle:
+            """Segments coloured one by one, from the start: viser 1.1.1's client does not switch a
+            line from one colour to per-segment colours (it draws them near white), so a handle
+            that starts with one colour and gets per-segment ones later, as a client watches, would
+            show white lines."""
+            return scene.add_line_segments(f"{_ROOT}/{name}", empty, np.zeros((1, 2, 3), dtype=np.uint8),
+                                           visible=False)
+
         self._spokes = lines("spokes", SPOKE_COLOR)
-        self._forces = [lines(f"forces/class{k}", COMPRESSIVE_COLOR) for k in range(FORCE_CLASSES)]
-        self._watched = lines("watched", tuple(WATCHED_COLORS[0]))
+        self._forces = [coloured_lines(f"forces/class{k}") for k in range(FORCE_CLASSES)]
+        self._watched = coloured_lines("watched")
         self._walls = lines("walls", WALL_COLOR)
         self._cell = lines("cell", CELL_COLOR)
         self._mechanism = lines("mechanism", MECHANISM_COLOR)
@@ -233,6 +246,22 @@ class SceneView:
         (indices of the last drawn frame; runs on viser's thread pool)."""
         self._pick_callbacks.append(callback)
 
+    def state(self) -> dict:
+        """What the scene holds now (``GET /scene``): disks drawn and how many of them lie inside
+        the square the camera was framed on, contact segments, walls, watched contacts, the
+        cell, that square (xmin, xmax, ymin, ymax) and the colour field."""
+        with self._lock:
+            frame = self._frame
+            if frame is None:
+                return {"frames": 0, "disks": 0, "disks_in_view": 0}
+            cx, cy, half = self._framed
+            x, y, r = frame.positions[:, 0], frame.positions[:, 1], frame.radii
+            inside = (x - r >= cx - half) & (x + r <= cx + half) & (y - r >= cy - half) & (y + r <= cy + half)
+            return {"frames": self.frames_pushed, "disks": int(len(r)), "disks_in_view": int(inside.sum()),
+                    "contacts": int(len(frame.contacts)), "walls": int(len(frame.walls)),
+                    "watched": int(len(frame.watched)), "cell": frame.cell, "mechanism": bool(self._mechanism.visible),
+                    "view": [cx - half, cx + half, cy - half, cy + half], "color_field": self._color_field}
+
     def fps(self) -> float:
         """Draws completed per second over the last 2 s (or since construction
         if that is shorter)."""
@@ -256,8 +285,10 @@ class SceneView:
         self._server.stop()
 
     def draw(self, frame: SceneFrame) -> None:
-        """Show `frame`: the disk mesh is rebuilt when N changes (and the
-        camera framed on it), otherwise its arrays are updated in place."""
+        """Show `frame`: the disk mesh is rebuilt when N changes, otherwise its
+        arrays are updated in place. The camera is framed on the picture when
+        the mesh is rebuilt, when the picture leaves the framed square (a block
+        sliding away) or shrinks below a third of it (a cell compressed)."""
         with self._lock:
             n = len(frame.radii)
             mean_radius = float(frame.radii.mean()) if n else 1.0
@@ -272,6 +303,8 @@ class SceneView:
                     self._rebuild_disks()
                     self._frame_camera(frame)
                 else:
+                    if self._needs_framing(frame):
+                        self._frame_camera(frame)
                     self._disks.batched_positions = self._positions3
                     self._disks.batched_scales = self._scales3
                     self._disks.batched_colors = self._colors
@@ -338,12 +371,19 @@ class SceneView:
             lod="off", cast_shadow=False, receive_shadow=False,
         )
 
+    def _needs_framing(self, frame: SceneFrame) -> bool:
+        xmin, xmax, ymin, ymax = frame_bounds(frame)
+        cx, cy, half = self._framed
+        outside = xmin < cx - half or xmax > cx + half or ymin < cy - half or ymax > cy + half
+        return outside or max(xmax - xmin, ymax - ymin) < 2.0 * half / 3.0
+
     def _frame_camera(self, frame: SceneFrame) -> None:
         """Point the initial camera (and every connected client's) down -z at
         the frame, +y up, far enough that the frame fills a square view."""
         xmin, xmax, ymin, ymax = frame_bounds(frame)
         centre = np.array([0.5 * (xmin + xmax), 0.5 * (ymin + ymax), 0.0])
-        half = 0.55 * max(xmax - xmin, ymax - ymin, 1e-9)
+        half = 0.55 * max((xmax - xmin) / MIN_ASPECT, ymax - ymin, 1e-9)
+        self._framed = (float(centre[0]), float(centre[1]), half)
         distance = half / np.tan(0.5 * CAMERA_FOV)
         position = centre + np.array([0.0, 0.0, distance])
         far = float(max(1000.0, 20.0 * distance))

@@ -1,12 +1,15 @@
 """``granlab serve``: the engine thread, the viser scene and the panel server, together.
 
 Binds 127.0.0.1 unless told otherwise (the lab has no authentication). Routes: ``/`` the
-dashboard (one per tab), ``/status`` JSON for tests and monitoring. The viser client is served
-by viser on its own port and embedded in the dashboard.
+dashboard (one per tab), ``/status`` and ``/scene`` JSON for tests and monitoring. The viser
+client is served by viser on its own port and embedded in the dashboard; only the dashboard's
+address is printed.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import re
 import socket
@@ -30,16 +33,16 @@ from .scene import SceneView
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
-class StatusHandler(tornado.web.RequestHandler):
-    """``GET /status``: the engine's status as JSON."""
+class JSONHandler(tornado.web.RequestHandler):
+    """``GET``: the dictionary ``read()`` returns, as JSON (the lab's status, the scene's state)."""
 
-    def initialize(self, lab):
-        self.lab = lab
+    def initialize(self, read):
+        self.read = read
 
     def get(self):
         self.set_header("Content-Type", "application/json")
         self.set_header("Cache-Control", "no-store")
-        self.write(json.dumps(jsonable(self.lab.status())))
+        self.write(json.dumps(jsonable(self.read())))
 
 
 class Lab:
@@ -48,8 +51,9 @@ class Lab:
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
                  preset: str = "ratchet", scene_rate: float = 30.0, **changes):
         self.host = host
-        self.engine = LabEngine(data_dir, preset, **changes)
-        self.scene = SceneView(host=host, port=0)
+        self.engine = LabEngine(data_dir, preset, wait_for_tab=True, **changes)
+        with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own address: the page embeds it
+            self.scene = SceneView(host=host, port=0)
         self.scene.on_pick(lambda index: self.engine.submit("watch_disk", index=index))
         self.engine.scene_fps = self.scene.fps
         self.scene_interval = 1.0 / scene_rate
@@ -58,8 +62,9 @@ class Lab:
         self.port = port or _free_port(host)
         origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
         self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
-                               show=False, start=False, title="GranLab", threaded=False,
-                               extra_patterns=[(r"/status", StatusHandler, {"lab": self})],
+                               show=False, start=False, title="GranLab", threaded=False, verbose=False,
+                               extra_patterns=[(r"/status", JSONHandler, {"read": self.status}),
+                                               (r"/scene", JSONHandler, {"read": self.scene.state})],
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000)
 
     def status(self) -> dict:
@@ -70,6 +75,7 @@ class Lab:
 
     def _session(self):
         self.engine.tabs += 1
+        self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)
         host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
         return Dashboard(self.engine, self.scene, f"http://{host}:{self.scene.port}/").view()
@@ -126,7 +132,7 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
               "can control the simulation and write files in its data folder", file=sys.stderr)
     print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, **changes)
-    print(f"GranLab lab at {lab.url} (3D scene on port {lab.scene.port}; status at {lab.url}status)", flush=True)
+    print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)
     lab.run_forever()
 
 

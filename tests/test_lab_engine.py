@@ -1,5 +1,6 @@
 """The lab's engine thread without a browser: commands, series for many readers, files, errors."""
 
+import json
 import math
 import time
 
@@ -22,14 +23,14 @@ def wait(predicate, timeout=60.0):
     raise AssertionError("condition not met in time")
 
 
-def last_message(engine, cursor=Cursor()):
-    _, _, columns = engine.messages.since(cursor)
-    return list(zip(columns["level"], columns["text"]))
+def last_message(engine, seq=0):
+    """(level, text) of the messages after sequence number ``seq``."""
+    return [(m.level, m.text) for m in engine.messages.since(seq)]
 
 
 @pytest.fixture
 def engine(tmp_path):
-    lab = LabEngine(tmp_path, preset="ratchet16")
+    lab = LabEngine(tmp_path, preset="ratchet16", speed=math.inf)
     lab.start()
     wait(lambda: lab.status()["step"] > 0)
     yield lab
@@ -63,6 +64,13 @@ def test_series_buffer_serves_each_reader_what_it_has_not_seen():
     buffer.extend([(float(k), 0.0) for k in range(3, 10)])  # beyond the capacity: the oldest go
     first, reset, columns = buffer.since(first)
     assert not reset and columns["t"] == [5.0, 6.0, 7.0, 8.0, 9.0]
+    assert buffer.array()[:, 0].tolist() == [5.0, 6.0, 7.0, 8.0, 9.0] and len(buffer) == 5
+    buffer.extend(np.array([[10.0, 0.0], [11.0, 0.0]]))  # wraps around the end of the ring
+    first, reset, columns = buffer.since(first)
+    assert not reset and columns["t"] == [10.0, 11.0]
+    buffer.extend([(float(k), 0.0) for k in range(12, 30)])  # more than the capacity at once
+    first, reset, columns = buffer.since(first)
+    assert columns["t"] == [25.0, 26.0, 27.0, 28.0, 29.0]
     buffer.reset(("t", "y"))
     first, reset, columns = buffer.since(first)
     assert reset and columns == {"t": [], "y": []}
@@ -81,11 +89,12 @@ def test_a_control_reaches_the_engine_between_steps(engine):
 
 
 def test_an_invalid_control_is_refused_and_the_run_goes_on(engine):
-    cursor, _, _ = engine.messages.since(Cursor())
+    seq = engine.messages.latest_seq
     engine.submit("apply", changes={"damping_ratio": 1.5})
-    wait(lambda: last_message(engine, cursor))
-    level, text = last_message(engine, cursor)[-1]
-    assert level == "error" and "damping_ratio = 1.5 is not allowed" in text
+    wait(lambda: last_message(engine, seq))
+    message = engine.messages.since(seq)[-1]
+    assert message.level == "error" and message.control == "damping_ratio"
+    assert message.text.startswith("Damping ζ = 1.5 is not allowed: a fraction of critical damping in [0, 1)")
     status = engine.status()
     assert status["settings"]["damping_ratio"] == 0.3 and status["state"] == "running"
     step = status["step"]
@@ -107,13 +116,18 @@ def test_the_engine_copies_a_frame_only_once_the_last_was_taken(engine):
 def test_pause_step_and_play(engine):
     engine.submit("pause")
     wait(lambda: engine.status()["state"] == "paused")
-    step = engine.status()["step"]
+    step, t = engine.status()["step"], engine.status()["time"]
     time.sleep(0.3)
     assert engine.status()["step"] == step
-    engine.submit("step")
-    wait(lambda: engine.status()["step"] == step + engine.source.settings.steps_per_frame)
+    rows = len(engine.buffers["time"])
+    engine.submit("step")  # to the next sample time: one more row of a series
+    wait(lambda: engine.status()["step"] > step)
+    status = engine.status()
+    interval = engine.source.cycle_time() / engine.source.samples_per_cycle
+    assert 0 < status["time"] - t <= interval + status["dt"] and status["state"] == "paused"
     engine.submit("play")
-    wait(lambda: engine.status()["step"] > step + engine.source.settings.steps_per_frame)
+    wait(lambda: engine.status()["time"] > status["time"] + interval)
+    assert len(engine.buffers["time"]) > rows
 
 
 def test_a_diverging_run_pauses_with_an_error_and_keeps_its_last_good_state(engine):
@@ -133,34 +147,56 @@ def test_a_diverging_run_pauses_with_an_error_and_keeps_its_last_good_state(engi
 
 
 def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
-    time.sleep(1.5)  # at least one frame in the history
+    """A lab run file holds the frames kept by simulated time with the settings of each, the lab's
+    series and the cycle records; its replay shows a frame and the series up to its time."""
+    wait(lambda: engine.status().get("cycle", 0) >= 1)
+    engine.submit("apply", changes={"amplitude": 0.25})  # from the next cycle on
+    wait(lambda: engine.status().get("cycle", 0) >= 3)
     engine.submit("save", name="lab-run")
     wait(lambda: "lab-run.h5" in engine.saved_files())
     with h5md.open_run(tmp_path / "lab-run.h5") as f:
         frames = h5md.frame_count(f)
-        assert frames >= 2
-        assert h5md.read_frame(f, frames - 1)["position"].shape == (16, 2)
+        first, last = h5md.read_frame(f, 0), h5md.read_frame(f, frames - 1)
+        series = h5md.lab_series(f)
+    assert last["position"].shape == (16, 2)
+    assert frames >= 10 * 3  # ten frames a cycle, compression included
+    assert json.loads(first["lab_settings_json"])["amplitude"] == 0.2
+    assert json.loads(last["lab_settings_json"])["amplitude"] == 0.25
+    assert set(series) == {"time", "cycles", "contacts"} and series["time"][0] == engine.source.series["time"]
+    info = h5md.summary(tmp_path / "lab-run.h5")
+    assert info["cycles"] == len(series["cycles"][1]) >= 4 and info["protocol"]["lab_preset"] == "ratchet16"
+
     engine.submit("load", name="lab-run.h5")
     wait(lambda: engine.status()["preset"] == "replay:lab-run.h5")
-    cursor, reset, columns = engine.series("replay", Cursor())
-    assert reset and len(columns["t"]) == frames
-    cursor, _, _ = engine.messages.since(Cursor())
+    engine.submit("pause")
+    engine.submit("seek", index=frames - 1)
+    status = wait(lambda: engine.status() if engine.status()["replay"]["frame"] == frames - 1 else None)
+    assert status["replay"] == {"of": "ratchet16", "frame": frames - 1, "frames": frames,
+                                "start": first["time"], "end": last["time"]}
+    assert status["settings"]["amplitude"] == 0.25 and status["time"] == last["time"]
+    _, reset, columns = engine.series("time", Cursor())
+    assert columns["t"][-1] <= last["time"] and len(columns["t"]) == np.sum(series["time"][1][:, 0] <= last["time"])
+    engine.submit("seek", index=0)
+    wait(lambda: engine.status()["replay"]["frame"] == 0)
+    _, reset, columns = engine.series("time", Cursor())
+    assert max(columns["t"]) <= first["time"]
+    seq = engine.messages.latest_seq
     engine.submit("save", name="again")
-    wait(lambda: last_message(engine, cursor))
-    assert "a running preset" in last_message(engine, cursor)[-1][1]
+    wait(lambda: last_message(engine, seq))
+    assert "a running preset" in last_message(engine, seq)[-1][1]
     engine.submit("preset", name="block")
     wait(lambda: engine.status()["preset"] == "block")
 
 
 def test_refused_file_names_leave_the_data_folder_untouched(engine, tmp_path):
-    cursor, _, _ = engine.messages.since(Cursor())
+    seq = engine.messages.latest_seq
     engine.submit("save", name="../outside")
-    wait(lambda: last_message(engine, cursor))
-    assert "plain name" in last_message(engine, cursor)[-1][1]
+    wait(lambda: last_message(engine, seq))
+    assert "plain name" in last_message(engine, seq)[-1][1]
     assert not (tmp_path.parent / "outside.h5").exists() and list(tmp_path.iterdir()) == []
     engine.submit("load", name="missing.h5")
-    wait(lambda: len(last_message(engine, cursor)) == 2)
-    level, text = last_message(engine, cursor)[-1]
+    wait(lambda: len(last_message(engine, seq)) == 2)
+    level, text = last_message(engine, seq)[-1]
     assert level == "error" and "missing.h5" in text
     assert engine.status()["preset"] == "ratchet16" and engine.status()["state"] == "running"
 
@@ -188,4 +224,48 @@ def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):
     assert arrows.shape[1:] == (2, 2) and len(arrows) % 3 == 0
     assert (len(arrows) > 0) == (result.report.values["null_modes"] > 0)
     engine.submit("analyze", kind="volume")
-    wait(lambda: any("analysis = 'volume' is not allowed" in text for _, text in last_message(engine)))
+    wait(lambda: any("analysis = volume is not allowed" in text for _, text in last_message(engine)))
+
+
+def test_the_lab_runs_at_the_chosen_speed_in_load_cycles_per_second(tmp_path):
+    """Simulated time follows the wall clock at the chosen speed (here 0.5 load cycles of T = 10
+    per second): the speed control is in simulated units, not steps."""
+    lab = LabEngine(tmp_path, preset="ratchet16", speed=0.5)
+    lab.start()
+    try:
+        wait(lambda: lab.status()["time"] > 1.0)
+        t0, wall0 = lab.status()["time"], time.perf_counter()
+        time.sleep(3.0)
+        rate = (lab.status()["time"] - t0) / (time.perf_counter() - wall0)
+        assert rate == pytest.approx(0.5 * 10.0, rel=0.2)
+        assert lab.status()["speed_achieved"] == pytest.approx(0.5, rel=0.2)
+    finally:
+        lab.stop()
+
+
+def test_a_lab_waiting_for_its_first_tab_starts_the_preset_at_t0(tmp_path):
+    lab = LabEngine(tmp_path, preset="ratchet16", wait_for_tab=True)
+    lab.start()
+    try:
+        time.sleep(0.5)
+        assert lab.status()["state"] == "waiting" and lab.status()["step"] == 0
+        lab.submit("tab_opened")
+        wait(lambda: lab.status()["state"] == "running" and lab.status()["step"] > 0)
+        assert lab.status()["time"] < 5.0  # from t = 0, not from where a warm-up left it
+    finally:
+        lab.stop()
+
+
+def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folder(engine, tmp_path):
+    import imageio.v3 as iio
+
+    wait(lambda: engine.status()["time"] > 12.0)
+    engine.submit("record", name="last-cycle.gif", seconds=10.0)  # 10 frames per cycle of T = 10
+    wait(lambda: (tmp_path / "last-cycle.gif").exists(), timeout=120.0)
+    frames = iio.imread(tmp_path / "last-cycle.gif", index=None)
+    assert 10 <= len(frames) <= 12 and frames.shape[1:3] == (720, 1280)
+    assert [m.text for m in engine.messages.since(0) if m.control == "record"][-1].startswith("recorded")
+    seq = engine.messages.latest_seq
+    engine.submit("record", name="movie.avi", seconds=10.0)
+    wait(lambda: last_message(engine, seq))
+    assert "a name ending in .gif or .mp4" in last_message(engine, seq)[-1][1]

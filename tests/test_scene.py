@@ -247,7 +247,21 @@ def test_first_draw_frames_the_camera_looking_down(view):
     np.testing.assert_allclose(camera.position[:2], [3.0, 2.0])
     np.testing.assert_allclose(camera.up, [0.0, 1.0, 0.0])
     visible_half_height = camera.position[2] * np.tan(camera.fov / 2)
-    assert 3.0 < visible_half_height < 3.6  # the 6-wide frame fits a square view with a 10 % margin
+    # the 6-wide frame fits, with a 10 % margin, a view as narrow as 3 wide for 4 high
+    assert visible_half_height * scene.MIN_ASPECT == pytest.approx(1.1 * 3.0)
+
+
+def test_the_camera_follows_a_picture_that_leaves_its_view_and_reports_what_it_shows(view):
+    frame = small_frame()
+    view.draw(frame)
+    state = view.state()
+    assert state["disks"] == state["disks_in_view"] == 4 and state["walls"] == 1 and state["watched"] == 1
+    moved = SceneFrame(**{**frame.__dict__, "positions": frame.positions + (40.0, 0.0),
+                          "walls": frame.walls + (40.0, 0.0), "cell": None})
+    view.draw(moved)  # a block that slid far away: framed again
+    assert view.state()["disks_in_view"] == 4
+    xmin, xmax, ymin, ymax = drawing.frame_bounds(moved)
+    np.testing.assert_allclose(view.server.initial_camera.look_at[:2], [(xmin + xmax) / 2, (ymin + ymax) / 2])
 
 
 def test_invalid_frame_shapes_name_the_field():

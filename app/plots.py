@@ -1,0 +1,408 @@
+"""The lab's live plots: each one a bokeh figure with its sources, fed the rows of the engine's
+series as a tab pulls them.
+
+A :class:`LivePlot` names the series it reads (``reads``), turns their new rows into its
+sources (:meth:`LivePlot.feed`) and redraws what depends on the status, such as a fitted line
+or the Coulomb cone at the current friction (:meth:`LivePlot.refresh`). Paths are drawn as
+segments between consecutive samples of the same path, so they are continuous lines that can
+be coloured piece by piece (by cycle, by contact, by status) and streamed. Every colour has a
+legend; numbers on axes are compact (``5×10⁻⁸``); axis labels carry units or say "paper units".
+
+Bokeh models belong to one document: every tab builds its own plots (:func:`make_plot`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import panel as pn
+from bokeh.models import ColorBar, ColumnDataSource, CustomJSTickFormatter, LinearColorMapper, Range1d, Span
+from bokeh.palettes import Blues256
+from bokeh.plotting import figure
+
+from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
+
+from .drawing import STATUS_LEGEND, WATCHED_COLORS, hex_color
+
+TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
+LINE_ROLLOVER = 40000
+PATH_ROLLOVER = 12000
+"""Rows a tab keeps of a time series, and segments of a path (a few load cycles of watched contacts)."""
+CYCLES_SHOWN = 6
+"""The q–γ plot colours the last cycles from light to dark; older ones are light grey."""
+
+COMPACT = """
+const SUP = {"-": "⁻", "0": "⁰", "1": "¹", "2": "²", "3": "³", "4": "⁴", "5": "⁵", "6": "⁶", "7": "⁷", "8": "⁸", "9": "⁹"};
+if (tick === 0) return "0";
+const a = Math.abs(tick);
+if (a >= 1e-3 && a < 1e5) return String(Number(tick.toPrecision(4))).replace("-", "−");
+const parts = tick.toExponential(2).split("e");
+const mantissa = String(Number(parts[0])).replace("-", "−");
+const exponent = String(Number(parts[1])).split("").map(c => SUP[c] || c).join("");
+return (mantissa === "1" ? "" : mantissa === "−1" ? "−" : mantissa + "×") + "10" + exponent;
+"""
+"""Tick labels: plain numbers from 10⁻³ to 10⁵, else ``m×10ⁿ`` with at most three digits."""
+
+
+def compact(value: float) -> str:
+    """A number as the axes show it (``5.06×10⁻⁸``), for titles and readouts."""
+    if value is None or not math.isfinite(value):
+        return "—"
+    if value == 0 or 1e-3 <= abs(value) < 1e5:
+        return f"{value:.{5 if abs(value) >= 1e3 else 4}g}".replace("-", "−")
+    mantissa, exponent = f"{value:.2e}".split("e")
+    superscript = str(int(exponent)).translate(str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return f"{float(mantissa):g}".replace("-", "−") + "×10" + superscript
+
+
+def lab_figure(name: str, title: str, x_label: str, y_label: str, **kwargs):
+    """A figure that fills its place, with compact tick labels and the lab's tools."""
+    fig = figure(name=f"figure-{name}", title=title, tools=TOOLS, sizing_mode="stretch_both", min_height=200,
+                 x_axis_label=x_label, y_axis_label=y_label, **kwargs)
+    fig.toolbar.logo = None
+    fig.toolbar.autohide = True
+    fig.title.text_font_size = "15px"
+    for axis in (fig.xaxis, fig.yaxis):
+        axis.axis_label_text_font_size = "13px"
+        axis.axis_label_text_font_style = "normal"
+        axis.major_label_text_font_size = "12px"
+        axis.formatter = CustomJSTickFormatter(code=COMPACT)
+    return fig
+
+
+def legend_above(fig, columns: int | None = None) -> None:
+    """Move the figure's legend above the plot, in a row (it hides no data there)."""
+    legend = fig.legend[0]
+    fig.add_layout(legend, "above")
+    legend.orientation = "horizontal"
+    legend.label_text_font_size = "12px"
+    legend.padding = 2
+    legend.spacing = 12
+    legend.margin = 2
+    if columns is not None:
+        legend.ncols = columns
+
+
+def _empty(columns) -> dict:
+    return {column: [] for column in columns}
+
+
+class LivePlot:
+    """A figure fed by series. ``reads``: series names; ``pane``: what the page shows."""
+
+    reads: tuple[str, ...] = ()
+
+    def __init__(self, name: str, fig):
+        self.name = name
+        self.figure = fig
+        self.sources: list[ColumnDataSource] = []
+        self.pane = pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=200)
+
+    def clear(self) -> None:
+        """Empty the sources of the data (a new preset, a reset, a replay's jump back); the
+        legend's placeholders stay."""
+        for source in self.sources:
+            source.data = _empty(source.data)
+
+    def feed(self, series: str, columns: dict, reset: bool, status: dict) -> None:
+        """New rows of ``series`` (columns of lists); ``reset``: they replace what was shown."""
+
+    def refresh(self, status: dict) -> None:
+        """Redraw what depends on the status (fits, the cone, ranges)."""
+
+
+def _stream(source: ColumnDataSource, columns: dict, reset: bool, rollover: int) -> None:
+    columns = {name: values for name, values in columns.items() if name in source.data}
+    if reset:
+        source.data = {name: columns.get(name, []) for name in source.data}
+    elif columns and len(next(iter(columns.values()))):
+        source.stream(columns, rollover=rollover)
+
+
+class LinePlot(LivePlot):
+    """Lines of one series: ``lines`` is a list of (x column, y column, legend label, colour)."""
+
+    def __init__(self, name, title, series, lines, x_label, y_label, columns, **kwargs):
+        super().__init__(name, lab_figure(name, title, x_label, y_label, **kwargs))
+        self.reads = (series,)
+        self.source = ColumnDataSource(_empty(columns), name=f"series-{name}")
+        self.sources = [self.source]
+        for x, y, label, color in lines:
+            options = {"legend_label": label} if len(lines) > 1 else {}
+            self.figure.line(x, y, source=self.source, color=color, line_width=2, **options)
+        if len(lines) > 1:
+            legend_above(self.figure)
+
+    def feed(self, series, columns, reset, status):
+        _stream(self.source, columns, reset, LINE_ROLLOVER)
+
+
+class Segments:
+    """Turns samples of paths into segments between consecutive samples of the same path
+    (keyed), remembering the last sample of each path across pulls."""
+
+    def __init__(self):
+        self.last: dict = {}
+
+    def reset(self) -> None:
+        self.last = {}
+
+    def add(self, keys, xs, ys, extra: dict) -> dict:
+        """Columns x0, y0, x1, y1 and the ``extra`` columns (of the segment's end sample) of the
+        new segments."""
+        out = {"x0": [], "y0": [], "x1": [], "y1": [], **{name: [] for name in extra}}
+        for k, (key, x, y) in enumerate(zip(keys, xs, ys)):
+            previous = self.last.get(key)
+            self.last[key] = (x, y)
+            if previous is None:
+                continue
+            out["x0"].append(previous[0])
+            out["y0"].append(previous[1])
+            out["x1"].append(x)
+            out["y1"].append(y)
+            for name, values in extra.items():
+                out[name].append(values[k])
+        return out
+
+
+class StrainPlot(LivePlot):
+    """Ratcheting Fig. 2: γ at the start of each cycle, from the reference cycle on (the first
+    cycles settle the packing), with the fitted strain per cycle. The y-range fits these points."""
+
+    reads = ("cycles",)
+
+    def __init__(self, reference: int, name="strain-per-cycle"):
+        self.reference = reference
+        fig = lab_figure(name, "Strain at the start of each cycle", "cycle N",
+                         "γ(N) − γ(N_ref)   (γ = L_y/L_y0 − L_x/L_x0, Eq. 2)")
+        super().__init__(name, fig)
+        fig.x_range = Range1d(0, 1)
+        fig.y_range = Range1d(-1, 1)
+        self.points = ColumnDataSource({"cycle": [], "strain": []}, name="strain-cycles")
+        self.fit = ColumnDataSource({"cycle": [], "strain": []}, name="strain-fit")
+        self.sources = [self.points, self.fit]
+        fig.scatter("cycle", "strain", source=self.points, size=7, legend_label="γ − γ_ref at the start of a cycle")
+        fig.line("cycle", "strain", source=self.fit, color="#d62728", line_width=2, legend_label="fitted line")
+        legend_above(fig)
+        self.cycles: dict[int, float] = {}
+        self._shown = None
+
+    def clear(self):
+        super().clear()
+        self.cycles = {}
+        self._shown = None
+
+    def feed(self, series, columns, reset, status):
+        if reset:
+            self.cycles = {}
+        self.cycles.update(zip(map(int, columns.get("cycle", [])), columns.get("gamma", [])))
+
+    def refresh(self, status):
+        fit = status.get("strain")
+        reference = fit["reference_cycle"] if fit else self.reference
+        key = (len(self.cycles), None if fit is None else fit["dgamma"])
+        if key == self._shown:
+            return
+        self._shown = key
+        if reference not in self.cycles:
+            self.points.data = {"cycle": [], "strain": []}
+            self.fit.data = {"cycle": [], "strain": []}
+            self.figure.title.text = f"Strain at the start of each cycle, from cycle {reference} on (not reached yet)"
+            return
+        cycles = np.array(sorted(c for c in self.cycles if c >= reference), dtype=float)
+        strain = np.array([self.cycles[int(c)] for c in cycles]) - self.cycles[reference]
+        self.points.data = {"cycle": cycles, "strain": strain}
+        fig = self.figure
+        fig.x_range.start, fig.x_range.end = reference - 0.5, max(cycles[-1], reference + 3) + 0.5
+        low, high = float(strain.min()), float(strain.max())
+        if fit is None:
+            self.fit.data = {"cycle": [], "strain": []}
+            fig.title.text = f"Strain at the start of each cycle, from cycle {reference} (the fit needs 3 cycles)"
+        else:
+            ends = np.array([cycles[0], cycles[-1]])
+            line = fit["mean_gamma"] - fit["gamma_ref"] + fit["dgamma"] * (ends - fit["mean_cycle"])
+            self.fit.data = {"cycle": ends, "strain": line}
+            low, high = min(low, float(line.min())), max(high, float(line.max()))
+            verdict = "ratcheting: the points lie on the line" if fit["ratcheting"] else \
+                "no clear ratcheting: the points scatter more than they drift"
+            fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fitted from cycle {reference}\n"
+                              f"{verdict} (RMS distance {compact(fit['rms'])})")
+        pad = 0.08 * (high - low) if high > low else max(abs(high), 1e-12)
+        fig.y_range.start, fig.y_range.end = low - pad, high + pad
+
+
+class LoadStrainPlot(LivePlot):
+    """Ratcheting Fig. 1: the load q against the strain γ, one continuous line, each cycle in a
+    shade of blue darker than the one before (a colour bar names the cycles)."""
+
+    reads = ("time",)
+
+    def __init__(self, name="q-gamma"):
+        fig = lab_figure(name, "Load q against strain γ (ratcheting Fig. 1)", "γ = L_y/L_y0 − L_x/L_x0",
+                         "q = Δσ (1 − cos ωt)  (Eq. 1, units of P0)")
+        super().__init__(name, fig)
+        self.source = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "cycle": []}, name="q-gamma-path")
+        self.sources = [self.source]
+        palette = list(reversed(Blues256[:200]))
+        self.mapper = LinearColorMapper(palette=palette, low=0, high=1, low_color="#dddddd")
+        fig.segment("x0", "y0", "x1", "y1", source=self.source, line_width=2,
+                    color={"field": "cycle", "transform": self.mapper})
+        fig.add_layout(ColorBar(color_mapper=self.mapper, title="cycle", width=10, title_text_font_size="11px",
+                                major_label_text_font_size="10px"), "right")
+        self.segments = Segments()
+        self.cycle = 0
+
+    def clear(self):
+        super().clear()
+        self.segments.reset()
+
+    def feed(self, series, columns, reset, status):
+        if reset:
+            self.segments.reset()
+        cycle = np.asarray(columns.get("cycle", []))
+        keep = cycle >= 0
+        rows = self.segments.add(np.zeros(int(keep.sum())), np.asarray(columns.get("gamma", []))[keep],
+                                 np.asarray(columns.get("q", []))[keep], {"cycle": cycle[keep].tolist()})
+        _stream(self.source, rows, reset, PATH_ROLLOVER)
+        if len(cycle) and cycle[keep].size:
+            self.cycle = int(cycle[keep].max())
+        self.mapper.low, self.mapper.high = max(0, self.cycle - CYCLES_SHOWN + 1) - 0.5, self.cycle + 0.5
+
+
+class ConePlot(LivePlot):
+    """Watched contacts in the (F_n, F_t) plane (ratcheting Figs. 3-4, 6; quasi-rigidity Fig. 3):
+    each contact a continuous line in its own colour (the colour it has in the scene), its
+    sliding samples marked by side, and the Coulomb cone |F_t| = μ (F_n + F0) dashed."""
+
+    def __init__(self, name, title, series, keyed: bool):
+        fig = lab_figure(name, title, "F_n = N^e − F0  (normal force without its viscous part, paper units)",
+                         "F_t  (tangential force, paper units)")
+        super().__init__(name, fig)
+        self.reads = (series,)
+        self.keyed = keyed
+        self.paths = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "t": [], "color": [], "label": []},
+                                      name=f"{name}-paths")
+        self.sliding = ColumnDataSource({"x": [], "y": [], "color": [], "marker": []}, name=f"{name}-sliding")
+        self.cone = ColumnDataSource({"x": [], "y": []}, name=f"{name}-cone")
+        self.sources = [self.paths, self.sliding, self.cone]
+        fig.line("x", "y", source=self.cone, color="#333333", line_dash="dashed", line_width=1.5,
+                 legend_label="Coulomb cone |F_t| = μ(F_n+F0)")
+        fig.segment("x0", "y0", "x1", "y1", source=self.paths, color="color", line_width=2, legend_field="label")
+        fig.scatter("x", "y", source=self.sliding, color="color", marker="marker", size=7)
+        for code, marker in ((STATUS_SLIDE_POS, "triangle"), (STATUS_SLIDE_NEG, "inverted_triangle")):
+            # an empty renderer per sliding side: the legend names the markers drawn above
+            label, color = STATUS_LEGEND[code]
+            fig.scatter(np.array([np.nan]), np.array([np.nan]), color=color, marker=marker, size=7, legend_label=label)
+        legend_above(fig, columns=4)
+        self.segments = Segments()
+        self.top = 0.0
+        self._cone_key = None
+
+    def clear(self):
+        super().clear()
+        self.segments.reset()
+        self.top = 0.0
+        self._cone_key = None
+
+    def feed(self, series, columns, reset, status):
+        if reset:
+            self.segments.reset()
+        normal = np.asarray(columns.get("normal", []), dtype=float)
+        tangential = np.asarray(columns.get("tangential", []), dtype=float)
+        state = np.asarray(columns.get("status", []), dtype=int)
+        watched = [tuple(p) for p in status.get("watched") or []]
+        if self.keyed:
+            pairs = list(zip(map(int, columns.get("i", [])), map(int, columns.get("j", []))))
+        else:
+            pairs = [watched[0] if watched else (0, 1)] * len(normal)
+        labels = dict(zip(watched, status.get("watched_labels") or []))
+        colors = [hex_color(WATCHED_COLORS[(watched.index(p) if p in watched else len(watched)) % len(WATCHED_COLORS)])
+                  for p in pairs]
+        names = [labels.get(pair, "%d–%d" % pair) for pair in pairs]
+        rows = self.segments.add(pairs, normal, tangential, {"t": columns.get("t", []), "color": colors,
+                                                             "label": names})
+        _stream(self.paths, rows, reset, PATH_ROLLOVER)
+        if len(normal):
+            self.top = max(self.top, float(np.abs(normal).max()))
+        slides = np.flatnonzero(np.isin(state, (STATUS_SLIDE_POS, STATUS_SLIDE_NEG)))
+        marks = {"x": normal[slides].tolist(), "y": tangential[slides].tolist(),
+                 "color": [STATUS_LEGEND[state[k]][1] for k in slides],
+                 "marker": ["triangle" if state[k] == STATUS_SLIDE_POS else "inverted_triangle" for k in slides]}
+        _stream(self.sliding, marks, reset, PATH_ROLLOVER)
+
+    def refresh(self, status):
+        settings = status.get("settings") or {}
+        friction = settings.get("friction", 0.5)
+        mu = math.inf if isinstance(friction, str) else float(friction)
+        f0 = float(settings.get("cohesion_force", 0.0) or 0.0)
+        key = (mu, f0, round(self.top, 12))
+        if key == self._cone_key or self.top <= 0.0:
+            return
+        self._cone_key = key
+        if math.isinf(mu):
+            self.cone.data = {"x": [], "y": []}
+            self.figure.title.text = self.figure.title.text.split(" — ")[0] + " — μ = ∞: the cone is the half-plane"
+            return
+        top = 1.1 * self.top
+        self.cone.data = {"x": [top, -f0, top], "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
+        self.figure.title.text = self.figure.title.text.split(" — ")[0] + f" — μ = {mu:g}"
+
+
+def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0) -> LivePlot:
+    """The plot ``name`` with ``time_label`` on its time axis; ``series`` (name -> columns) are
+    the series of the preset it shows, ``reference_cycle`` the cycle its strain is counted from."""
+    if name == "strain-per-cycle":
+        return StrainPlot(reference_cycle)
+    if name == "q-gamma":
+        return LoadStrainPlot()
+    if name == "coulomb-cone":
+        return ConePlot(name, "Watched contacts in the (F_n, F_t) plane", "contacts", keyed=True)
+    if name == "block-cone":
+        return ConePlot(name, "The block's contact in the (F_n, F_t) plane (quasi-rigidity Fig. 3)", "block",
+                        keyed=False)
+    lines = LINES[name]
+    plot = LinePlot(name, lines["title"], lines["series"], lines["lines"], lines.get("x", time_label), lines["y"],
+                    series.get(lines["series"], lines.get("columns", ())), **lines.get("options", {}))
+    if name == "block-load":
+        plot.figure.add_layout(Span(location=1.0, dimension="width", line_dash="dotted", line_color="#555555"))
+        plot.figure.line(np.array([np.nan]), np.array([np.nan]), line_dash="dotted", color="#555555",
+                         legend_label="μF_n: sliding can start")
+    return plot
+
+
+LINES = {
+    "energy": {"title": "Energy budget", "series": "time", "y": "energy (paper units)",
+               "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
+                         ("t", "dissipated", "dissipated", "#d62728"),
+                         ("t", "balance", "balance (should stay 0)", "#000000")]},
+    "coordination": {"title": "Coordination number z = 2M/N", "series": "time", "y": "z (contacts per disk)",
+                     "lines": [("t", "z", "z", "#1f77b4")]},
+    "springs": {"title": "Tangential spring D_t of the three models (ratcheting Fig. 9)", "series": "springs",
+                "y": "D_t (length, paper units)",
+                "lines": [("t", "dt_cundall_strack", "Cundall–Strack", "#d62728"),
+                          ("t", "dt_alpha", "α-corrected", "#1f77b4"), ("t", "dt_angle", "angle-based", "#2ca02c")]},
+    "spring-path": {"title": "(D_t, D_n) along the closed path A→B→C→D→A", "series": "springs",
+                    "x": "D_t (length, paper units)", "y": "D_n (gap, < 0: overlap)",
+                    "lines": [("dt_cundall_strack", "dn_cundall_strack", "Cundall–Strack", "#d62728"),
+                              ("dt_alpha", "dn_alpha", "α-corrected", "#1f77b4"),
+                              ("dt_angle", "dn_angle", "angle-based", "#2ca02c")]},
+    "block-load": {"title": "Sideways load and the block's velocity", "series": "block",
+                   "y": "load / μF_n;  velocity (paper units)",
+                   "lines": [("t", "load_ratio", "load / μF_n", "#1f77b4"), ("t", "velocity", "velocity", "#d62728")]},
+    "clusters": {"title": "Number of clusters", "series": "time", "y": "clusters", "lines": [("t", "clusters", "", "#1f77b4")]},
+    "coordination-gilabert": {"title": "Coordination number z", "series": "time", "y": "z (contacts per disk)",
+                              "lines": [("t", "z", "", "#1f77b4")]},
+    "solid-fraction": {"title": "Solid fraction Φ", "series": "time", "y": "Φ", "lines": [("t", "phi", "", "#1f77b4")]},
+    "pressure": {"title": "Pressure on the cell (Gilabert Eq. 3)", "series": "time", "y": "P (units of F₁/a)",
+                 "lines": [("t", "pressure", "", "#1f77b4")]},
+    "kinetic": {"title": "Kinetic energy", "series": "time", "y": "kinetic energy (units of F₁ a)",
+                "lines": [("t", "kinetic", "", "#1f77b4")], "options": {"y_axis_type": "log"}},
+    "replay-energy": {"title": "Energy budget of the replayed run", "series": "replay", "y": "energy (paper units)",
+                      "columns": ("t", "step", "kinetic", "stored", "dissipated", "balance"),
+                      "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
+                                ("t", "dissipated", "dissipated", "#d62728"), ("t", "balance", "balance", "#000000")]},
+}
+"""The plots that are lines of one series: title, series, axis labels (x: the preset's time
+label unless given) and lines (x column, y column, legend label, colour)."""
+
