@@ -144,6 +144,8 @@ class Dashboard:
         self.load_name = W.Select(name="Replay a saved run", options=self.engine.saved_files(),
                                   css_classes=["load-select"], **wide)
         self.load = W.Button(name="Load and replay", css_classes=["load-button"], **wide)
+        self.frames_kept = W.FloatInput(name="Frames kept (replays, movies) per cycle", value=10.0, step=1.0,
+                                        start=0.0, css_classes=["frames-input"], **wide)
         self.record_name = W.TextInput(name="Movie of the recent frames", placeholder="movie1.gif or .mp4",
                                        css_classes=["record-name"], **wide)
         self.record_seconds = W.FloatInput(name="of the last (simulated time)", value=20.0, step=5.0,
@@ -160,7 +162,8 @@ class Dashboard:
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
                 (self.rolling_stiffness, "rolling_stiffness"), (self.cohesion_force, "cohesion_force"),
-                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model")]
+                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"),
+                (self.frames_kept, "frames_per_cycle")]
         for widget, key in live:
             widget.param.watch(lambda e, key=key: self._control(key, e.new), "value")
         self.damping.param.watch(lambda e: self._control("damping_ratio", e.new), "value_throttled")
@@ -221,14 +224,16 @@ class Dashboard:
     def _use_plots(self, names: list[str], time_label: str, columns: dict, reference_cycle: int = 0) -> None:
         """Show the plots ``names`` (made once per tab and time axis, emptied for the new source)."""
         self.cursors = {}
+        self.shown = []
         for name in names:
-            plot = self.plots.get((name, time_label))
-            if plot is None:
-                plot = self.plots[(name, time_label)] = make_plot(name, time_label, columns, reference_cycle)
+            key = (name, time_label, tuple(sorted((k, tuple(v)) for k, v in columns.items())), reference_cycle)
+            plot = self.plots.get(key)
+            if plot is None:  # a plot of the same name may read other columns in another preset
+                plot = self.plots[key] = make_plot(name, time_label, columns, reference_cycle)
             plot.clear()
             for series in plot.reads:
                 self.cursors[series] = Cursor()
-        self.shown = [self.plots[(name, time_label)] for name in names]
+            self.shown.append(plot)
 
     def _show_pane(self) -> None:
         choice = self.pane_choice.value
@@ -374,7 +379,8 @@ class Dashboard:
             self._note("run", "error", status.get("error", ""))
         cls = PRESETS.get(shown_as)
         unit = status.get("clock_unit", "")
-        self.speed.name = f"Speed ({unit}s per second)" if unit else "Speed"
+        self.speed.name = f"Speed ({unit} per second)" if unit else "Speed"
+        self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
         readout = status.get("readout") or {}
         fit = status.get("strain") or {}
         parts = [f"<b>{status.get('stage', '')}</b>", f"t = {compact(status.get('time', 0.0))}"]
@@ -383,11 +389,11 @@ class Dashboard:
         if fit:
             parts.append(f"Δγ/cycle = {compact(fit.get('dgamma'))}")
         shown = {"phi": lambda v: f"Φ = {v:.3f}", "z": lambda v: f"z = {v:.2f}",
-                 "sliding": lambda v: f"sliding contacts: {v}", "loops": lambda v: f"loop {v}",
+                 "sliding": lambda v: f"sliding: {v}", "loops": lambda v: f"loop {v}",
                  "load": lambda v: f"load = {v:.2f} μF_n"}
         parts += [shown[key](value) for key, value in readout.items() if key in shown]
         achieved = status.get("speed_achieved", 0.0)
-        parts.append(f"{achieved:.2g} {unit}s/s" if state == "running" and unit else state)
+        parts.append(f"{achieved:.2g} {unit.split()[-1]}/s" if state == "running" and unit else state)
         if state == "running":
             parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
         self.readout.object = ("<div style='font-size:13px;line-height:1.35;padding-top:4px'>" +
@@ -443,7 +449,7 @@ class Dashboard:
         cls = PRESETS.get(replay["of"] if replay else status["preset"])
         used = set(cls.controls) if cls else set()
         for widget, key in self.settings_widgets:
-            widget.visible = key in used
+            widget.visible = key in used or key == "frames_per_cycle"
             widget.disabled = replay is not None
             if not settings or key not in settings:
                 continue
@@ -488,7 +494,8 @@ class Dashboard:
                                         sizing_mode="stretch_width")
         view = pn.Column(pn.pane.HTML("<b>View</b>"), self.color, self.watch, self.watch_button,
                          self._note_pane("watch"), sizing_mode="stretch_width")
-        files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"), self.save_name, self.save,
+        files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"),
+                          *labelled(self.frames_kept, "frames_per_cycle"), self.save_name, self.save,
                           self._note_pane("save"), self.load_name, self.load, self._note_pane("load"),
                           self.record_name, self.record_seconds, self.record, self._note_pane("record"),
                           sizing_mode="stretch_width")

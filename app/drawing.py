@@ -44,8 +44,8 @@ WATCHED_COLORS = np.array(
 """Colour of the k-th watched contact (cycled): the same in the scene and in the Coulomb-cone
 plot, so a path on the plot can be found in the packing. None of them is a contact kind's."""
 
-STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("slides on the +μ side", "#f59b00"),
-                 STATUS_SLIDE_NEG: ("slides on the −μ side", "#b35a00"),
+STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("slides, +μ side", "#f59b00"),
+                 STATUS_SLIDE_NEG: ("slides, −μ side", "#b35a00"),
                  STATUS_COHESIVE: ("attracted at a distance", "#1e5adc")}
 """Name and colour of each contact status in the plots of watched contacts."""
 

@@ -97,7 +97,7 @@ class Replay:
         self.times = np.array([frame["time"] for frame in self.frames])
         self.of = protocol.get("lab_preset") if protocol.get("lab_preset") in PRESETS and lab else None
         span = float(self.times[-1] - self.times[0])
-        self.clock_unit = protocol.get("clock_unit", "10 frames")
+        self.clock_unit = protocol.get("clock_unit", "tens of frames")
         self.cycle_time = float(protocol.get("cycle_time", 10.0 * span / max(1, self.count - 1) or 1.0))
         settings = self.settings(0) or {}
         self.speed = float(settings.get("speed", 1.0)) if isinstance(settings.get("speed"), (int, float)) else 1.0
@@ -125,7 +125,7 @@ class Replay:
         return {"preset": self.name, "title": f"Replay of {self.path.name}",
                 "stage": f"frame {self.index + 1} of {self.count}", "time": frame["time"], "step": frame["step"],
                 "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
-                "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed,
+                "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed, "window": 0.0,
                 "replay": {"of": self.of, "frame": self.index, "frames": self.count,
                            "start": float(self.times[0]), "end": float(self.times[-1])}}
 
@@ -342,6 +342,7 @@ class LabEngine:
         """Show ``source`` (a preset from its start, or a replay at its first frame)."""
         self.source = source
         self._history.clear()
+        self._rate.clear()
         self.error = ""
         self._reset_buffers()
         if isinstance(source, Preset):
@@ -567,7 +568,7 @@ class LabEngine:
         if len(frames) < 2:
             raise ParameterError("record seconds", seconds,
                                  f"a span holding at least 2 kept frames (frames are kept every "
-                                 f"{preset.cycle_time() / preset.frames_per_cycle:.3g} of simulated time)")
+                                 f"{preset.cycle_time() / preset.settings.frames_per_cycle:.3g} of simulated time)")
         self._recorder.submit(self._write_movie, path, frames)
         self._info(f"recording {len(frames)} frames to {path.name}...", "record")
 
@@ -610,5 +611,7 @@ class LabEngine:
 
 
 def _shown(value) -> str:
-    """A value as the user typed it (no quotes around strings)."""
-    return value if isinstance(value, str) else f"{value:g}" if isinstance(value, float) else repr(value)
+    """A value as the user typed it (no quotes around strings; ∞ for inf)."""
+    if isinstance(value, float):
+        return "∞" if value == math.inf else f"{value:g}"
+    return value if isinstance(value, str) else repr(value)

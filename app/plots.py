@@ -128,6 +128,7 @@ class LinePlot(LivePlot):
         self.reads = (series,)
         self.source = ColumnDataSource(_empty(columns), name=f"series-{name}")
         self.sources = [self.source]
+        self.lines = lines
         for x, y, label, color in lines:
             options = {"legend_label": label} if len(lines) > 1 else {}
             self.figure.line(x, y, source=self.source, color=color, line_width=2, **options)
@@ -136,6 +137,15 @@ class LinePlot(LivePlot):
 
     def feed(self, series, columns, reset, status):
         _stream(self.source, columns, reset, LINE_ROLLOVER)
+
+    def refresh(self, status):
+        """Plots against time follow the last ``window`` of simulated time (a few load cycles, so
+        the cycles can be told apart on a projector), or show the whole run."""
+        window = float(status.get("window") or 0.0)
+        x_range = self.figure.x_range
+        if self.lines[0][0] != "t" or (x_range.follow_interval or 0.0) == window:
+            return
+        x_range.follow, x_range.follow_interval = ("end", window) if window > 0 else (None, None)
 
 
 class Segments:
@@ -225,9 +235,9 @@ class StrainPlot(LivePlot):
             self.fit.data = {"cycle": ends, "strain": line}
             low, high = min(low, float(line.min())), max(high, float(line.max()))
             verdict = "ratcheting: the points lie on the line" if fit["ratcheting"] else \
-                "no clear ratcheting: the points scatter more than they drift"
+                "no clear ratcheting: they scatter more than they drift"
             fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fitted from cycle {reference}\n"
-                              f"{verdict} (RMS distance {compact(fit['rms'])})")
+                              f"{verdict} (RMS {compact(fit['rms'])})")
         pad = 0.08 * (high - low) if high > low else max(abs(high), 1e-12)
         fig.y_range.start, fig.y_range.end = low - pad, high + pad
 
@@ -294,7 +304,7 @@ class ConePlot(LivePlot):
             # an empty renderer per sliding side: the legend names the markers drawn above
             label, color = STATUS_LEGEND[code]
             fig.scatter(np.array([np.nan]), np.array([np.nan]), color=color, marker=marker, size=7, legend_label=label)
-        legend_above(fig, columns=4)
+        legend_above(fig, columns=3)
         self.segments = Segments()
         self.top = 0.0
         self._cone_key = None
@@ -359,8 +369,7 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
     if name == "coulomb-cone":
         return ConePlot(name, "Watched contacts in the (F_n, F_t) plane", "contacts", keyed=True)
     if name == "block-cone":
-        return ConePlot(name, "The block's contact in the (F_n, F_t) plane (quasi-rigidity Fig. 3)", "block",
-                        keyed=False)
+        return ConePlot(name, "The block's contact in the (F_n, F_t) plane (Fig. 3)", "block", keyed=False)
     lines = LINES[name]
     plot = LinePlot(name, lines["title"], lines["series"], lines["lines"], lines.get("x", time_label), lines["y"],
                     series.get(lines["series"], lines.get("columns", ())), **lines.get("options", {}))
@@ -378,7 +387,7 @@ LINES = {
                          ("t", "balance", "balance (should stay 0)", "#000000")]},
     "coordination": {"title": "Coordination number z = 2M/N", "series": "time", "y": "z (contacts per disk)",
                      "lines": [("t", "z", "z", "#1f77b4")]},
-    "springs": {"title": "Tangential spring D_t of the three models (ratcheting Fig. 9)", "series": "springs",
+    "springs": {"title": "Spring D_t of the three models (ratcheting Fig. 9)", "series": "springs",
                 "y": "D_t (length, paper units)",
                 "lines": [("t", "dt_cundall_strack", "Cundall–Strack", "#d62728"),
                           ("t", "dt_alpha", "α-corrected", "#1f77b4"), ("t", "dt_angle", "angle-based", "#2ca02c")]},

@@ -201,6 +201,8 @@ class SceneView:
         self._cell = lines("cell", CELL_COLOR)
         self._mechanism = lines("mechanism", MECHANISM_COLOR)
         scene.on_click()(self._on_scene_click)
+        self._pose = None
+        self._server.on_client_connect(self._on_client)
 
     @property
     def port(self) -> int:
@@ -393,12 +395,32 @@ class SceneView:
         camera.up = (0.0, 1.0, 0.0)
         camera.position = position
         camera.look_at = centre
+        self._pose = (position, centre, far)
         for client in self._server.get_clients().values():
-            client.camera.up_direction = (0.0, 1.0, 0.0)
-            client.camera.fov = float(CAMERA_FOV)
-            client.camera.far = far
-            client.camera.position = position
-            client.camera.look_at = centre
+            self._aim(client)
+
+    def _aim(self, client: viser.ClientHandle) -> None:
+        """Point ``client``'s camera at the framed square."""
+        position, centre, far = self._pose
+        client.camera.up_direction = (0.0, 1.0, 0.0)
+        client.camera.fov = float(CAMERA_FOV)
+        client.camera.far = far
+        client.camera.position = position
+        client.camera.look_at = centre
+
+    def _on_client(self, client: viser.ClientHandle) -> None:
+        """Aim a new client's camera once it reports its first pose: viser sends a client the
+        initial camera of the moment it connected, and a client still loading when the picture
+        was framed again (a new preset) would keep the old view."""
+        aimed = []
+
+        def first_report(camera) -> None:
+            if not aimed and self._pose is not None:
+                aimed.append(True)
+                with self._lock:
+                    self._aim(client)
+
+        client.camera.on_update(first_report)
 
     def _draw_forces(self, frame: SceneFrame, z: float, mean_radius: float) -> None:
         """Contact segments sorted into FORCE_CLASSES handles by |F|, coloured by

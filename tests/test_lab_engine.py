@@ -269,3 +269,15 @@ def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folde
     engine.submit("record", name="movie.avi", seconds=10.0)
     wait(lambda: last_message(engine, seq))
     assert "a name ending in .gif or .mp4" in last_message(engine, seq)[-1][1]
+
+
+def test_a_number_of_disks_the_preset_cannot_use_is_refused_and_the_run_goes_on(engine):
+    seq = engine.messages.latest_seq
+    step = engine.status()["step"]
+    engine.submit("apply", changes={"particles": 2, "seed": 0})
+    wait(lambda: last_message(engine, seq))
+    message = engine.messages.since(seq)[-1]
+    assert message.control == "particles"
+    assert message.text == "Disks N = 2 is not allowed: 4 to 20000 disks for the ratchet16 preset"
+    assert engine.status()["particles"] == 16
+    wait(lambda: engine.status()["step"] > step)

@@ -97,7 +97,7 @@ def test_series_are_sampled_in_simulated_time_whatever_the_step_count_asked(ratc
     per_contact = [np.sum((paths[:, 0] == i) & (paths[:, 1] == j)) for i, j in set(map(tuple, paths[:, :2]))]
     assert max(per_contact) == preset.path_samples_per_cycle >= 2 * math.pi * 50
     frames = np.array(frames)
-    assert np.sum((frames >= start) & (frames < start + period - 1e-9)) == preset.frames_per_cycle
+    assert np.sum((frames >= start) & (frames < start + period - 1e-9)) == preset.settings.frames_per_cycle == 10
 
 
 def test_loading_controls_wait_for_the_next_cycle_and_law_controls_act_at_once():

@@ -10,7 +10,7 @@ each preset has a clock unit (a load cycle, a loop of the closed path, Gilabert'
 lasts :meth:`Preset.cycle_time`, and :meth:`Preset.advance` stops on its way at every sample
 time to record the time series (``samples_per_cycle`` per unit), the paths of watched
 contacts (``path_samples_per_cycle``) and, through ``on_frame``, the frames a replay keeps
-(``frames_per_cycle``). A fast preset therefore draws smooth paths however fast it runs.
+(the setting ``frames_per_cycle``). A fast preset therefore draws smooth paths however fast it runs.
 Nothing here imports a UI library: presets run headless in tests.
 """
 
@@ -41,6 +41,7 @@ CONTROL_LABELS = {
     "period": "Period T", "phase": "Loading phase φ", "friction": "Friction μ", "rolling_friction": "Rolling friction μr",
     "rolling_stiffness": "Rolling stiffness Kr", "cohesion_force": "Cohesion F0", "cohesion_range": "Cohesion range D0",
     "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
+    "frames_per_cycle": "Frames kept",
 }
 """The name each control has on the lab's page."""
 
@@ -67,6 +68,7 @@ class LabSettings:
     tangential_model: str = "cundall-strack"
     damping_ratio: float = 0.3
     speed: float = 1.0
+    frames_per_cycle: float = 10.0
 
     def __post_init__(self):
         if isinstance(self.particles, bool) or not isinstance(self.particles, (int, np.integer)) \
@@ -80,6 +82,9 @@ class LabSettings:
         if not -180.0 <= finite("phase", self.phase) <= 180.0:
             raise ParameterError("phase", self.phase, "an angle from -180 to 180 degrees")
         positive("speed", self.speed, allow_inf=True)
+        if not 0.0 < finite("frames_per_cycle", self.frames_per_cycle) <= 100.0:
+            raise ParameterError("frames_per_cycle", self.frames_per_cycle,
+                                 "from more than 0 to 100 frames kept per clock unit (a load cycle, a loop, T_0)")
         ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
                    rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
                    cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
@@ -124,17 +129,17 @@ class Preset(ABC):
     #: the plots of the preset (the lab's names), and the two that show what it is about
     plots: tuple[str, ...] = ()
     key_plots: tuple[str, ...] = ()
-    #: what the speed control counts per second of wall clock; one lasts :meth:`cycle_time`
-    clock_unit = "load cycle"
+    #: what the speed control counts per second of wall clock (plural); one lasts :meth:`cycle_time`
+    clock_unit = "load cycles"
     #: the time axes' label (the preset's unit of time)
     time_label = "t"
+    #: the time plots show the last ``window_cycles`` clock units (0: the whole run)
+    window_cycles = 10
     #: time-series samples per clock unit
     samples_per_cycle = 200
     #: path samples per clock unit: at least one per 1 % of the load amplitude (max |dq/dt| =
     #: 2 pi Delta sigma / T, so 2 pi * 50 = 315 per period)
     path_samples_per_cycle = 320
-    #: frames a replay keeps per clock unit
-    frames_per_cycle = 10
     #: fewest and most disks the preset can use
     particle_range = (1, 20000)
 
@@ -212,7 +217,7 @@ class Preset(ABC):
         unit = self.cycle_time()
         for key, per_cycle, record in (("sample", self.samples_per_cycle, self.sample),
                                        ("path", self.path_samples_per_cycle, self._record_paths),
-                                       ("frame", self.frames_per_cycle, self._record_frame)):
+                                       ("frame", self.settings.frames_per_cycle, self._record_frame)):
             if now >= self._due[key] - tolerance:
                 record()
                 interval = unit / per_cycle
@@ -339,7 +344,8 @@ class Preset(ABC):
     def status(self) -> dict:
         return {"preset": self.name, "title": self.title, "stage": self.stage,
                 "settings": dataclasses.asdict(self.settings), "clock_unit": self.clock_unit,
-                "cycle_time": self.cycle_time(), "readout": self.readout()}
+                "cycle_time": self.cycle_time(), "window": self.window_cycles * self.cycle_time(),
+                "readout": self.readout()}
 
     def readout(self) -> dict:
         """Figures for the lab's readout strip (those that mean something for the preset): solid
@@ -671,9 +677,10 @@ class ClosedPathPreset(Preset):
                           "dn_angle")}
     path_series = ("springs",)
     plots = key_plots = ("spring-path", "springs")
-    clock_unit = "loop"
+    clock_unit = "loops"
     time_label = "t (one loop lasts 0.4)"
     path_samples_per_cycle = 200
+    window_cycles = 15
     radius = 0.5
     overlap = 0.01
     depth = 0.02
@@ -806,9 +813,9 @@ class GilabertPreset(Preset):
 
     clock_unit = "T₀"
     time_label = "t (T₀ = √(m a/F₁))"
+    window_cycles = 0
     samples_per_cycle = 2
     path_samples_per_cycle = 2
-    frames_per_cycle = 0.2
     particle_range = (10, 20000)
 
     def cycle_time(self) -> float:
@@ -832,7 +839,7 @@ class AggregationPreset(GilabertPreset):
     title = "Cohesive powder: aggregation (Gilabert method 2, Figs. 4 and 11)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "particles", "seed", "damping_ratio")
     defaults = {"particles": 300, "friction": 0.15, "cohesion_force": 1.0, "cohesion_range": 1e-3,
-                "damping_ratio": 0.8, "speed": math.inf}
+                "damping_ratio": 0.8, "speed": math.inf, "frames_per_cycle": 0.2}
     series = {"time": ("t", "z", "phi", "clusters", "kinetic")}
     plots = ("clusters", "coordination-gilabert", "solid-fraction", "kinetic")
     key_plots = ("clusters", "coordination-gilabert")
@@ -912,7 +919,7 @@ class CompressionPreset(GilabertPreset):
     title = "Compression of a granular gas (Gilabert method 1)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "particles", "seed",
                 "damping_ratio")
-    defaults = {"particles": 300, "friction": 0.15, "damping_ratio": 0.8, "speed": math.inf}
+    defaults = {"particles": 300, "friction": 0.15, "damping_ratio": 0.8, "speed": math.inf, "frames_per_cycle": 0.2}
     series = {"time": ("t", "z", "phi", "pressure", "kinetic")}
     plots = ("solid-fraction", "coordination-gilabert", "pressure", "kinetic")
     key_plots = ("solid-fraction", "coordination-gilabert")
