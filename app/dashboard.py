@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,8 @@ SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, 
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
 PANES = ("Key plots", "More plots", "About this preset", "Analysis")
 HEADER_HEIGHT = 58
+HEADER_NOTES = ("preset", "run", "speed")
+"""Messages shown in the header, beside the buttons that cause them."""
 NOTE_SECONDS = 12.0
 """How long a confirmation stays next to its control (errors stay until the next message)."""
 
@@ -54,9 +57,12 @@ def _speed_label(speed) -> str:
                if math.isfinite(SPEEDS[label]) and math.isfinite(value) else (0 if SPEEDS[label] == value else 99))
 
 
-def _note(level: str, text: str) -> str:
+def _note(level: str, text: str, one_line: bool = False) -> str:
+    """A message as HTML; ``one_line`` (the header's): cut with an ellipsis, whole on hover."""
     color = {"error": "#b00020", "warning": "#8a5a00"}.get(level, "#1b5e20")
-    return f"<div style='font-size:12px;color:{color};line-height:1.3'>{text}</div>"
+    cut = "white-space:nowrap;overflow:hidden;text-overflow:ellipsis;" if one_line else ""
+    return f"<div title='{escape(text, quote=True)}' style='font-size:12px;color:{color};line-height:1.3;{cut}'>" \
+           f"{escape(text)}</div>"
 
 
 class Dashboard:
@@ -209,7 +215,7 @@ class Dashboard:
     def _note(self, key: str, level: str, text: str) -> None:
         key = key if key in self.notes else "run"
         pane = self.notes[key]
-        pane.object = _note(level, text)
+        pane.object = _note(level, text, one_line=key in HEADER_NOTES)
         pane.visible = True
         self._note_shown[key] = math.inf if level == "error" else time.monotonic()
 
@@ -293,8 +299,9 @@ class Dashboard:
         legend_above(structure)
         self.analysis_figures = {name: pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=320, visible=False)
                                  for name, fig in (("network", network), ("forces", forces), ("structure", structure))}
+        # the pictures first: on a 768-pixel screen the table below them scrolls
         return pn.Column(pn.Row(self.analysis_kind, self.analysis_button), self._note_pane("analysis"),
-                         self.analysis_text, *self.analysis_figures.values(), sizing_mode="stretch_both", scroll=True)
+                         *self.analysis_figures.values(), self.analysis_text, sizing_mode="stretch_both", scroll=True)
 
     def _update_analysis(self) -> None:
         result = self.engine.analysis.latest()
@@ -332,7 +339,7 @@ class Dashboard:
         self._pull(status)
         self._expire_notes()
         self._messages(status)
-        self._show_status(status, shown_as)
+        self._show_status(status)
         self._update_analysis()
         self.load_name.options = self.engine.saved_files()
 
@@ -372,12 +379,11 @@ class Dashboard:
             if message.level == "error" and message.control in CONTROL_LABELS:
                 self._sync(status)
 
-    def _show_status(self, status: dict, shown_as: str | None) -> None:
+    def _show_status(self, status: dict) -> None:
         state = status.get("state", "")
         self.play.name = "Pause" if state == "running" else "Play"
         if state == "error" and not self.notes["run"].visible:
             self._note("run", "error", status.get("error", ""))
-        cls = PRESETS.get(shown_as)
         unit = status.get("clock_unit", "")
         self.speed.name = f"Speed ({unit} per second)" if unit else "Speed"
         self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
@@ -396,7 +402,7 @@ class Dashboard:
         parts.append(f"{achieved:.2g} {unit.split()[-1]}/s" if state == "running" and unit else state)
         if state == "running":
             parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
-        self.readout.object = ("<div style='font-size:13px;line-height:1.35;padding-top:4px'>" +
+        self.readout.object = ("<div style='font-size:14px;line-height:1.3;padding:2px 0 0 10px;white-space:nowrap'>" +
                                " · ".join(p for p in parts if p) + "</div>")
         scene = self.scene.state()
         key = (self.scene.color_field, tuple(status.get("watched_labels") or ()), scene.get("walls", 0) > 0,
@@ -453,18 +459,20 @@ class Dashboard:
             widget.disabled = replay is not None
             if not settings or key not in settings:
                 continue
-            value = settings[key]
-            infinite = isinstance(value, str) and value == "inf"
+            value = math.inf if settings[key] == "inf" else settings[key]  # JSON carries inf as "inf"
             if widget is self.no_sliding:
-                widget.value = infinite or (not isinstance(value, str) and math.isinf(value))
+                widget.value = value == math.inf
             elif widget is self.friction:
-                widget.value = 0.2 if infinite or math.isinf(value) else float(value)
+                widget.value = 0.2 if value == math.inf else float(value)
             else:
                 widget.value = value
         self.apply_reset.visible = "particles" in used
         for group, keys in self.groups.items():
             group.visible = bool(used & keys)
         self.no_controls.visible = not used
+        self.no_controls.object = ("<i>A replay of a run file that has no lab settings: only its speed and its "
+                                   "timeline.</i>" if replay is not None else
+                                   "<i>This preset has no live controls: only its speed.</i>")
 
     # ------------------------------------------------------------------ layout
     def view(self):
@@ -503,12 +511,13 @@ class Dashboard:
                             sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
         header = pn.Row(pn.pane.HTML("<div style='font-size:22px;font-weight:bold;padding-top:8px'>GranLab</div>",
                                      width=105),
-                        self.preset, self.play, self.step, self.reset, self.speed, self.readout,
-                        height=HEADER_HEIGHT, sizing_mode="stretch_width")
-        # one line of fixed height: a message appearing or expiring never moves the page below it
-        messages = pn.Row(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"), height=24,
-                          sizing_mode="stretch_width", styles={"border-bottom": "1px solid #ddd", "overflow": "hidden"},
-                          margin=0)
+                        self.preset, self.play, self.step, self.reset, self.speed,
+                        pn.Column(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"),
+                                  sizing_mode="stretch_width", margin=(6, 0, 0, 0)),
+                        height=HEADER_HEIGHT, sizing_mode="stretch_width", styles={"overflow": "hidden"})
+        # the readout on a line of its own, of fixed height: nothing below it moves as it changes
+        readout = pn.Row(self.readout, height=26, sizing_mode="stretch_width", margin=0,
+                         styles={"border-bottom": "1px solid #ddd", "background": "#f6f7f9", "overflow": "hidden"})
         self.timeline_label = pn.pane.HTML("", width=220)
         self.timeline_row = pn.Row(self.timeline, self.timeline_label, self._note_pane("replay"),
                                    sizing_mode="stretch_width", visible=False, css_classes=["timeline"])
@@ -516,4 +525,4 @@ class Dashboard:
         centre = pn.Column(self.scene_pane, self.legend, self.timeline_row, sizing_mode="stretch_both", min_width=600,
                            styles={"flex": "1.25 1 0"})
         body = pn.Row(sidebar, centre, self.right, sizing_mode="stretch_both")
-        return pn.Column(header, messages, body, sizing_mode="stretch_both")
+        return pn.Column(header, readout, body, sizing_mode="stretch_both")

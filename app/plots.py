@@ -62,7 +62,7 @@ def lab_figure(name: str, title: str, x_label: str, y_label: str, **kwargs):
                  x_axis_label=x_label, y_axis_label=y_label, **kwargs)
     fig.toolbar.logo = None
     fig.toolbar.autohide = True
-    fig.title.text_font_size = "15px"
+    fig.title.text_font_size = "14px"
     for axis in (fig.xaxis, fig.yaxis):
         axis.axis_label_text_font_size = "13px"
         axis.axis_label_text_font_style = "normal"
@@ -235,7 +235,7 @@ class StrainPlot(LivePlot):
             self.fit.data = {"cycle": ends, "strain": line}
             low, high = min(low, float(line.min())), max(high, float(line.max()))
             verdict = "ratcheting: the points lie on the line" if fit["ratcheting"] else \
-                "no clear ratcheting: they scatter more than they drift"
+                "no clear ratcheting: scatter exceeds drift"
             fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fitted from cycle {reference}\n"
                               f"{verdict} (RMS {compact(fit['rms'])})")
         pad = 0.08 * (high - low) if high > low else max(abs(high), 1e-12)

@@ -51,6 +51,16 @@ def set_speed(page, url: str, value: float) -> None:
         time.sleep(0.5)
 
 
+def dismiss_software_notice(page) -> None:
+    """Close viser's notice that WebGL runs in software (headless Chromium has no GPU; a
+    classroom's machine does not show it), so that it hides no disks in the picture."""
+    for frame in page.frames:
+        if frame != page.main_frame:
+            for button in frame.locator(".mantine-Notification-closeButton").all():
+                button.click()
+    page.wait_for_timeout(500)
+
+
 def shoot(url: str, out: Path, sizes: list[tuple[int, int]], presets: list[str]) -> list[Path]:
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
@@ -72,6 +82,7 @@ def shoot(url: str, out: Path, sizes: list[tuple[int, int]], presets: list[str])
                     time.sleep(0.5)
                 set_speed(page, url, default)
                 page.wait_for_timeout(8000)  # the scene draws in software: let it catch up
+                dismiss_software_notice(page)
                 path = out / f"lab-{name}-{width}.png"
                 page.screenshot(path=str(path))
                 Image.open(path).convert("RGB").quantize(256).save(path, optimize=True)

@@ -9,7 +9,7 @@ import pytest
 
 from engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
                                        network)
-from engine.params import ContactLaw, Integration
+from engine.params import ContactLaw
 from engine.protocols.presets import make_preset, preset_settings
 from engine.simulation import Simulation
 from engine.state import WALL_FORCE, WALL_VELOCITY, ParticleState
