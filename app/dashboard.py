@@ -185,7 +185,7 @@ class Dashboard:
         self.save.on_click(lambda e: self._command("save", name=self.save_name.value.strip()))
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
         self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
-                                                     seconds=self.record_seconds.value))
+                                                     seconds=self.record_seconds.value, color=self.scene.color_field))
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new)), "value_throttled")
 
     def _friction(self) -> None:

@@ -41,7 +41,7 @@ from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, L
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
-from .drawing import SceneFrame
+from .drawing import COLOR_FIELDS, SceneFrame
 from .frames import FrameData, build_frame
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
@@ -296,7 +296,7 @@ class LabEngine:
             elif command == "load":
                 self._load(payload["name"])
             elif command == "record":
-                self._record(payload["name"], float(payload["seconds"]))
+                self._record(payload["name"], float(payload["seconds"]), payload.get("color", "rotation"))
             elif command == "analyze":
                 self._analyze(payload["kind"])
             self.command_ms = 1000.0 * (time.perf_counter() - submitted)
@@ -553,10 +553,13 @@ class LabEngine:
         self._info(f"replaying {path.name}: {self.source.count} frames, t = {self.source.times[0]:.4g} to "
                    f"{self.source.times[-1]:.4g}", "load")
 
-    def _record(self, name: str, seconds: float) -> None:
+    def _record(self, name: str, seconds: float, color: str = "rotation") -> None:
         """Render the kept frames of the last ``seconds`` of simulated time into a movie in the
-        data folder, on a thread of its own (rendering takes a while; the run goes on)."""
+        data folder, disks coloured by ``color``, on a thread of its own (rendering takes a
+        while; the run goes on)."""
         preset = self._preset_only("record")
+        if color not in COLOR_FIELDS:
+            raise ParameterError("record colouring", color, "one of " + ", ".join(COLOR_FIELDS))
         path = safe_path(self.data_dir, name, suffix=".gif")
         if path.suffix not in MOVIE_SUFFIXES:
             raise ParameterError("movie name", name, "a name ending in " + " or ".join(MOVIE_SUFFIXES))
@@ -569,15 +572,16 @@ class LabEngine:
             raise ParameterError("record seconds", seconds,
                                  f"a span holding at least 2 kept frames (frames are kept every "
                                  f"{preset.cycle_time() / preset.settings.frames_per_cycle:.3g} of simulated time)")
-        self._recorder.submit(self._write_movie, path, frames)
+        self._recorder.submit(self._write_movie, path, frames, color)
         self._info(f"recording {len(frames)} frames to {path.name}...", "record")
 
-    def _write_movie(self, path: Path, frames: list) -> None:
+    def _write_movie(self, path: Path, frames: list, color: str) -> None:
         from .render import write_movie  # matplotlib takes a second to load: only when a movie is made
 
         try:
             partial = path.with_name(path.stem + ".part" + path.suffix)
-            count = write_movie(((build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames), partial)
+            count = write_movie(((build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames), partial,
+                                color_field=color)
             partial.replace(path)
             self._info(f"recorded {count} frames to {path.name}", "record")
         except (GranLabError, ValueError, OSError) as error:

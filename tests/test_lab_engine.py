@@ -261,14 +261,21 @@ def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folde
 
     wait(lambda: engine.status()["time"] > 12.0)
     engine.submit("record", name="last-cycle.gif", seconds=10.0)  # 10 frames per cycle of T = 10
-    wait(lambda: (tmp_path / "last-cycle.gif").exists(), timeout=120.0)
+    engine.submit("record", name="by-pressure.gif", seconds=10.0, color="pressure")
+    wait(lambda: (tmp_path / "by-pressure.gif").exists(), timeout=120.0)
     frames = iio.imread(tmp_path / "last-cycle.gif", index=None)
     assert 10 <= len(frames) <= 12 and frames.shape[1:3] == (720, 1280)
+    by_pressure = iio.imread(tmp_path / "by-pressure.gif", index=None)
+    assert by_pressure.shape == frames.shape and not np.array_equal(by_pressure[0], frames[0])
     assert [m.text for m in engine.messages.since(0) if m.control == "record"][-1].startswith("recorded")
     seq = engine.messages.latest_seq
     engine.submit("record", name="movie.avi", seconds=10.0)
     wait(lambda: last_message(engine, seq))
     assert "a name ending in .gif or .mp4" in last_message(engine, seq)[-1][1]
+    seq = engine.messages.latest_seq
+    engine.submit("record", name="movie.gif", seconds=10.0, color="velocity")
+    wait(lambda: last_message(engine, seq))
+    assert "one of rotation, coordination, pressure, sliding" in last_message(engine, seq)[-1][1]
 
 
 def test_a_number_of_disks_the_preset_cannot_use_is_refused_and_the_run_goes_on(engine):
