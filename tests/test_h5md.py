@@ -126,6 +126,46 @@ def test_a_writer_killed_mid_run_leaves_a_readable_file(tmp_path):
         assert state is not None and state["step"] >= 5 * (frames - 1)
     resumed, _ = h5md.resume(path)
     resumed.run(10)
+    cut = tmp_path / "crash-cut.h5"
+    cut.write_bytes(path.read_bytes()[:path.stat().st_size // 2])
+    with pytest.raises(h5md.RunFileError, match="is truncated"):
+        h5md.open_run(cut)
+
+
+READERS = textwrap.dedent("""
+    import sys
+    from engine.analysis.states import read_state
+    from engine.io import h5md
+    for reader in (h5md.summary, read_state, h5md.resume):
+        try:
+            reader(sys.argv[1])
+            print("read")
+        except h5md.RunFileError as error:
+            print(error)
+""")
+
+
+@pytest.mark.parametrize("cut", [100, 2000, 100_000, 0.5, -1000])
+def test_a_truncated_run_file_is_named_at_once_by_every_reader(tmp_path, cut):
+    """HDF5's SWMR reader waits for ever for the missing bytes; every reader (info, analyze,
+    resume) must say at once that the file is cut short."""
+    sim = _sim()
+    whole = tmp_path / "whole.h5"
+    with h5md.RunWriter(whole, sim, scene=SCENE) as writer:
+        for _ in range(6):
+            sim.run(200)
+            writer.write_frame(sim)
+        writer.write_checkpoint(sim)
+    data = whole.read_bytes()
+    size = int(len(data) * cut) if isinstance(cut, float) else cut % len(data)
+    path = tmp_path / "cut.h5"
+    path.write_bytes(data[:size])
+    process = subprocess.run([sys.executable, "-c", READERS, str(path)], capture_output=True, text=True, timeout=60)
+    lines = process.stdout.splitlines()
+    assert len(lines) == 3, process.stderr
+    assert all(line == f"run file {str(path)!r} is truncated: {size} bytes of the {len(data)} its header records, "
+               "so frames, checkpoint and parameters past the cut are lost (was it cut short while copied or "
+               "written?)" for line in lines)
 
 
 def test_resume_matches_an_uninterrupted_run_bit_for_bit(tmp_path):

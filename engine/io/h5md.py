@@ -361,18 +361,53 @@ def watched_contacts(sim: Simulation, pairs: list[tuple[int, int]]):
 
 # ---------------------------------------------------------------------------------------------- reading
 def open_run(path: str | Path) -> h5py.File:
-    """Open a run file for reading (SWMR first, so a file whose writer died still opens)."""
+    """Open a run file for reading.
+
+    Without SWMR, which finds a truncated file at once (HDF5's SWMR reader retries the missing
+    bytes for ever). Only a file still marked as being written (a live writer, or one that was
+    killed) is opened in SWMR mode, after its header's end of file is checked against its size.
+    """
     path = Path(path)
     if not path.is_file():
-        raise RunFileError(f"run file {str(path)!r} does not exist")
-    try:
-        return h5py.File(path, "r", libver="latest", swmr=True)
-    except OSError:
-        pass
+        raise RunFileError(f"run file {str(path)!r} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
     try:
         return h5py.File(path, "r")
     except OSError as error:
+        if "truncated file" in str(error):
+            raise _truncated(path) from error
+        if "already open for write" not in str(error):
+            raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
+    if _stored_eof(path) > path.stat().st_size:
+        raise _truncated(path)
+    try:
+        return h5py.File(path, "r", libver="latest", swmr=True)
+    except OSError as error:
         raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
+
+
+def _stored_eof(path: Path) -> int:
+    """The end of file an HDF5 file's superblock (version 2 or 3, which SWMR needs) records;
+    0 when there is no such superblock at the offsets HDF5 allows (0, 512, 1024, ...)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        offset = 0
+        while offset + 48 <= size:
+            f.seek(offset)
+            head = f.read(48)
+            if head[:8] == b"\x89HDF\r\n\x1a\n":
+                if head[8] not in (2, 3) or head[9] != 8:
+                    return 0
+                base, _extension, eof = np.frombuffer(head[12:36], dtype="<u8")
+                return int(base + eof)
+            offset = 512 if offset == 0 else 2 * offset
+    return 0
+
+
+def _truncated(path: Path) -> RunFileError:
+    stored, size = _stored_eof(path), path.stat().st_size
+    of = f" of the {stored} its header records" if stored > size else ""
+    return RunFileError(f"run file {str(path)!r} is truncated: {size} bytes{of}, so frames, checkpoint and "
+                        f"parameters past the cut are lost (was it cut short while copied or written?)")
 
 
 def frame_count(f: h5py.File) -> int:
