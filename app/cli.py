@@ -34,6 +34,7 @@ def build_parser():
                         help="disk colours: rotation, coordination, pressure or sliding (default rotation)")
     render.add_argument("--no-forces", action="store_true", help="leave out the force network")
     render.add_argument("--fps", default="10", metavar="F", help="frames per second of a movie (default 10)")
+    render.add_argument("--force", action="store_true", help="write over existing pictures or movies")
     render.add_argument("--json", action="store_true", help="print one JSON object")
     render.set_defaults(handler=_render, printer=_print_render)
     bench = commands.choices["bench"]
@@ -47,7 +48,8 @@ def build_parser():
 def _render(args) -> dict:
     from .render import render_run
 
-    return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps)
+    return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps,
+                      args.force)
 
 
 def _print_render(result: dict) -> None:

@@ -20,7 +20,9 @@ import dataclasses
 import json
 import math
 import queue
+import os
 import re
+import tempfile
 import threading
 import time
 from collections import deque
@@ -35,6 +37,7 @@ from engine.analysis.states import PackingState, read_state
 from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io import h5md
 from engine.io.jsonsafe import jsonable
+from engine.io.outputs import free_name
 from engine.params import positive
 from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset,
                                       pair_label, preset_settings)
@@ -66,6 +69,24 @@ def safe_path(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
     if path.resolve().parent != data_dir.resolve():
         raise ParameterError("file name", name, "a file inside the lab's data folder")
     return path
+
+
+def new_file(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
+    """:func:`safe_path` for a file to be written: a name already in the data folder is refused
+    (the lab never writes over a file), with a free name suggested."""
+    path = safe_path(data_dir, name, suffix)
+    if path.exists() or path.is_symlink():
+        raise ParameterError("file name", name, f"a name not yet in the data folder ({free_name(path).name} is free)")
+    return path
+
+
+def partial_file(path: Path) -> Path:
+    """A new hidden file beside ``path`` to write into before renaming it to ``path``: made
+    exclusively with a random name (a link planted in the data folder is never followed) and
+    ending in ``path``'s suffix (a movie's format follows it)."""
+    handle, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".part" + path.suffix)
+    os.close(handle)
+    return Path(name)
 
 
 def settings_json(settings: LabSettings) -> str:
@@ -510,24 +531,28 @@ class LabEngine:
 
     def _save(self, name: str) -> None:
         preset = self._preset_only("save")
-        path = safe_path(self.data_dir, name)
+        path = new_file(self.data_dir, name)
         sim = preset.views()[0].sim
         frames = list(self._history)
         if frames[-1][0].step != sim.step:
             frames.append((sim.snapshot(), settings_json(preset.settings)))
-        partial = path.with_name(path.name + ".part")
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
                     "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time()}
-        with h5md.RunWriter(partial, sim, protocol=jsonable(protocol), lab_series=dict(preset.series)) as writer:
-            for snap, settings in frames:
-                writer.write_frame(snap, settings)
-            for name_, buffer in self.buffers.items():
-                if name_ in preset.series:
-                    writer.write_series(name_, buffer.array())
-            if "cycles" in preset.series:
-                self._write_cycles(writer, self.buffers["cycles"], sim)
-            writer.write_checkpoint(sim)
-        partial.replace(path)  # a file appears in the list only once complete
+        partial = partial_file(path)
+        try:
+            with h5md.RunWriter(partial, sim, protocol=jsonable(protocol), lab_series=dict(preset.series),
+                                overwrite=True) as writer:
+                for snap, settings in frames:
+                    writer.write_frame(snap, settings)
+                for name_, buffer in self.buffers.items():
+                    if name_ in preset.series:
+                        writer.write_series(name_, buffer.array())
+                if "cycles" in preset.series:
+                    self._write_cycles(writer, self.buffers["cycles"], sim)
+                writer.write_checkpoint(sim)
+            partial.replace(path)  # a file appears in the list only once complete
+        finally:
+            partial.unlink(missing_ok=True)
         self._info(f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) "
                    f"to {path.name}", "save")
 
@@ -560,7 +585,7 @@ class LabEngine:
         preset = self._preset_only("record")
         if color not in COLOR_FIELDS:
             raise ParameterError("record colouring", color, "one of " + ", ".join(COLOR_FIELDS))
-        path = safe_path(self.data_dir, name, suffix=".gif")
+        path = new_file(self.data_dir, name, suffix=".gif")
         if path.suffix not in MOVIE_SUFFIXES:
             raise ParameterError("movie name", name, "a name ending in " + " or ".join(MOVIE_SUFFIXES))
         if not seconds > 0:
@@ -578,14 +603,18 @@ class LabEngine:
     def _write_movie(self, path: Path, frames: list, color: str) -> None:
         from .render import write_movie  # matplotlib takes a second to load: only when a movie is made
 
+        partial = None
         try:
-            partial = path.with_name(path.stem + ".part" + path.suffix)
+            partial = partial_file(path)
             count = write_movie(((build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames), partial,
                                 color_field=color)
             partial.replace(path)
             self._info(f"recorded {count} frames to {path.name}", "record")
         except (GranLabError, ValueError, OSError) as error:
             self.messages.add("error", f"recording {path.name} failed: {error}", "record")
+        finally:
+            if partial is not None:
+                partial.unlink(missing_ok=True)
 
     def _analyze(self, kind: str) -> None:
         """Hand the current state to the analysis thread: a snapshot of the running preset (its

@@ -32,6 +32,7 @@ from matplotlib.path import Path as StrokePath
 
 from engine.errors import ParameterError
 from engine.io import h5md
+from engine.io.outputs import check_output
 
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, PRESSURE_LUT,
                       ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, SceneFrame, cell_outline,
@@ -607,9 +608,10 @@ def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
 
 
 def render_run(path, out, frames=None, size="1280x720", color_field: str = "rotation", forces: bool = True,
-               fps=10.0) -> dict:
+               fps=10.0, force: bool = False) -> dict:
     """Render frames of a GranLab run file into ``out`` (:func:`write_movie`); what
-    ``granlab render`` calls, so errors name its options.
+    ``granlab render`` calls, so errors name its options. Existing pictures or movies are
+    written over only with ``force``.
 
     ``frames``: see :func:`select_frames`; default the last frame for ``.png``, every frame
     for a movie. ``size`` (W, H) or ``"WxH"``; ``fps`` frames per second of a movie. The axes
@@ -632,13 +634,12 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
         if count == 0:
             raise h5md.RunFileError(f"{str(path)!r} holds no complete frame")
         indices = select_frames(("-1" if suffix == ".png" else ":") if frames is None else frames, count, "--frames")
+        targets = [png_name(out, index) for index in indices] if suffix == ".png" and len(indices) > 1 else [out]
+        for target in targets:
+            check_output(target, force=force)
         bounds = union_bounds(frame for frame, _ in run_frames(f, indices))
         written = write_movie(run_frames(f, indices), out, size, color_field, forces, fps, bounds, indices)
-    if suffix == ".png" and written > 1:
-        files = [str(png_name(out, index)) for index in indices]
-    else:
-        files = [str(out)]
-    return {"run_file": str(path), "out": str(out), "files": files, "frames": written,
+    return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,
             "indices": [indices[0], indices[-1]], "size": list(size), "color": color_field, "forces": forces,
             "fps": fps, "seconds_per_frame": (time.perf_counter() - start) / written}
 

@@ -42,20 +42,24 @@ def _float(text: str) -> float:
 
 
 def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
-              resume: str | None = None) -> dict:
+              resume: str | None = None, force: bool = False) -> dict:
     """Run a scene to its end (or continue a run file from its checkpoint); returns the final
     state, energy budget and recorded series. With ``out`` a run file gets a frame every
-    ``frame_every`` steps (default: the scene's ``record_every``) and a checkpoint at the end."""
+    ``frame_every`` steps (default: the scene's ``record_every``) and a checkpoint at the end.
+    ``out`` is never the resumed file, and an existing ``out`` is written over only with ``force``."""
     from .io import h5md
+    from .io.outputs import check_output
     from .io.scene import load_scene, parse_scene
 
     start = time.perf_counter()
+    if resume is not None and out is None:
+        out = str(Path(resume).with_name(Path(resume).stem + "-resumed.h5"))
+    if out is not None:
+        check_output(out, force=force, inputs=[resume] if resume else [])
     if resume is not None:
         sim, record = h5md.resume(resume)
         scene = parse_scene(record["scene"], origin=f"scene stored in {resume}")
         total = max(0, scene.step_count(sim.dt) - sim.step)
-        if out is None:
-            out = str(Path(resume).with_name(Path(resume).stem + "-resumed.h5"))
     else:
         scene = load_scene(name)
         if scene.threads:
@@ -64,8 +68,8 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
     every = frame_every or scene.record_every or total or 1
-    writer = h5md.RunWriter(out, sim, scene=scene.source, protocol={"command": "run", "scene": scene.title}) \
-        if out else None
+    writer = h5md.RunWriter(out, sim, scene=scene.source, protocol={"command": "run", "scene": scene.title},
+                            overwrite=force) if out else None
 
     def record():
         budget = sim.energy()
@@ -182,8 +186,11 @@ def _print_bench(result: dict) -> None:
 def _prepare(args) -> dict:
     from .analysis.packing import packing_stats
     from .io.h5md import RunWriter
+    from .io.outputs import check_output
     from .protocols import prepare
 
+    if args.out:
+        check_output(args.out, force=args.force)
     if args.method == "compress":
         prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
                                     friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0)
@@ -203,7 +210,8 @@ def _prepare(args) -> dict:
     run_file = args.out
     if run_file:
         with RunWriter(run_file, sim, protocol={"command": "prepare", **{k: v for k, v in vars(args).items()
-                                                                          if k not in ("handler", "printer")}}) as w:
+                                                                          if k not in ("handler", "printer")}},
+                       overwrite=args.force) as w:
             w.write_frame(sim)
             w.write_checkpoint(sim)
     return {"method": args.method, "particles": sim.particles.count, "phi": stats.phi, "z": stats.z,
@@ -234,7 +242,7 @@ def _study(args) -> dict:
                          friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
                          gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
     progress = None if args.json else text_progress
-    return run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress)
+    return run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress, force=args.force)
 
 
 def _print_study(result: dict) -> None:
@@ -351,9 +359,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scene", nargs="?", default="default", help="scene file or built-in name (default: default)")
     run.add_argument("--out", help="write a run file (HDF5, H5MD)")
     run.add_argument("--frame-every", type=_positive_int, help="steps between frames (default: record_every)")
-    run.add_argument("--resume", metavar="RUNFILE", help="continue a run file from its checkpoint to the end of its scene")
+    run.add_argument("--resume", metavar="RUNFILE", help="continue a run file from its checkpoint to the end of its scene "
+                                                         "(into --out, default RUNFILE-resumed.h5; never RUNFILE itself)")
+    run.add_argument("--force", action="store_true", help="write over an existing --out file")
     run.add_argument("--json", action="store_true", help="print one JSON object")
-    run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume),
+    run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force),
                      printer=_print_run)
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")
@@ -394,6 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     prepare.add_argument("--accelerated", action="store_true", help="method 2 series B: soft, then stiffened")
     prepare.add_argument("--max-time", type=_float, help="simulated-time limit of each stage")
     prepare.add_argument("--out", help="write the packing to a run file")
+    prepare.add_argument("--force", action="store_true", help="write over an existing --out file")
     prepare.add_argument("--json", action="store_true", help="print one JSON object")
     prepare.set_defaults(handler=_prepare_with_defaults, printer=_print_prepare)
 
@@ -416,6 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="record every contact's (F_n, F_t, status) K times per cycle in the run files")
     ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
+    ratchet.add_argument("--force", action="store_true", help="write over run files already in --out")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")
     ratchet.set_defaults(handler=_study, printer=_print_study)
 

@@ -41,3 +41,7 @@ class DivergenceError(GranLabError, RuntimeError):
 
 class SceneError(GranLabError, ValueError):
     """A broken scene file: names the key and what is allowed."""
+
+
+class OutputError(GranLabError, OSError):
+    """An output that cannot be written, or would write over a file that was not given up."""

@@ -22,6 +22,7 @@ import numpy as np
 from .analysis.ratchet import deviatoric_strain, ratchet_verdict
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
+from .io.outputs import check_output
 from .params import TANGENTIAL_MODELS, nonnegative, positive
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import compress
@@ -72,7 +73,11 @@ class RatchetStudy:
         nonnegative("gravity", self.gravity)
 
 
-def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None) -> list[dict]:
+def sample_file(out_dir: str, model: str, seed: int) -> Path:
+    return Path(out_dir) / f"ratchet_{model}_seed{seed}.h5"
+
+
+def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrite: bool = False) -> list[dict]:
     """Prepare sample ``seed``, cycle it with each model; one result (or error) per model."""
     results = []
     try:
@@ -92,9 +97,9 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None) -> list[
             run_file = None
             writer = None
             if out_dir is not None:
-                run_file = str(Path(out_dir) / f"ratchet_{model}_seed{seed}.h5")
+                run_file = str(sample_file(out_dir, model, seed))
                 watch = touching_pairs(sim) if study.watch_samples else []
-                writer = RunWriter(run_file, sim, watch=watch,
+                writer = RunWriter(run_file, sim, watch=watch, overwrite=overwrite,
                                    protocol={"study": "ratchet", "seed": seed, "model": model, **study.__dict__})
             try:
                 def on_cycle(cycle, s, lx, ly):
@@ -169,13 +174,18 @@ def warm_up() -> None:
 
 
 def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir: str | None = None,
-                      progress=None, workers: int | None = None) -> dict:
-    """Run every sample on Dask and summarise. ``progress(done, total)`` is called as samples finish."""
+                      progress=None, workers: int | None = None, force: bool = False) -> dict:
+    """Run every sample on Dask and summarise. ``progress(done, total)`` is called as samples finish.
+    Run files already in ``out_dir`` are written over only with ``force``."""
+    seeds = range(study.first_seed, study.first_seed + study.samples)
     if out_dir is not None:
+        check_output(out_dir, folder=True)
+        for seed in seeds:
+            for model in study.models:
+                check_output(sample_file(out_dir, model, seed), force=force)
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    seeds = range(study.first_seed, study.first_seed + study.samples)
-    outcomes = run_tasks(ratchet_sample, [(study, seed, out_dir) for seed in seeds],
+    outcomes = run_tasks(ratchet_sample, [(study, seed, out_dir, force) for seed in seeds],
                          [f"ratchet-sample-{seed}" for seed in seeds], scheduler=scheduler, workers=workers,
                          warm_up=warm_up, progress=progress)
     results = []

@@ -83,3 +83,51 @@ def test_errors_exit_with_status_2_and_name_the_problem(tmp_path):
     assert bad_zeta.returncode == 2 and "damping_ratio = 1.2" in bad_zeta.stderr
     bad_mu = granlab("experiment", "block", "--mu", "inf", check=False)
     assert bad_mu.returncode == 2 and "mu = inf is not allowed" in bad_mu.stderr
+
+
+PAIR = """
+[simulation]
+duration = 0.5
+dt = 1e-3
+[[particles.disk]]
+x = 0.0
+y = 0.0
+r = 0.5
+vx = 1.0
+[[particles.disk]]
+x = 2.0
+y = 0.0
+r = 0.5
+"""
+
+
+def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(tmp_path):
+    scene = tmp_path / "pair.toml"
+    scene.write_text(PAIR)
+    out = tmp_path / "run.h5"
+    granlab("run", str(scene), "--out", str(out))
+    kept = out.read_bytes()
+    refusals = {
+        ("run", str(scene), "--out", str(out)):
+            f"--out {str(out)!r} exists: give --force to write over it, or another name "
+            f"({str(tmp_path / 'run-2.h5')!r} is free)",
+        ("run", "--resume", str(out), "--out", str(out), "--force"):
+            f"--out {str(out)!r} is the input file: writing it would lose what it holds; give another name "
+            f"({str(tmp_path / 'run-2.h5')!r} is free)",
+        ("prepare", "--method", "compress", "--out", str(out)): f"--out {str(out)!r} exists",
+        ("run", str(scene), "--out", str(tmp_path)): f"--out {str(tmp_path)!r} is a folder: give a file name inside it",
+        ("run", str(scene), "--out", "/proc/granlab.h5"): "--out '/proc/granlab.h5' cannot be written: no file can "
+                                                          "be made in '/proc'",
+        ("study", "ratchet", "--samples", "1", "--out", str(out)): f"--out {str(out)!r} is a file, not a folder",
+    }
+    for args, message in refusals.items():
+        process = granlab(*args, check=False)
+        assert process.returncode == 2 and process.stderr.count("\n") == 1, (args, process.stderr)
+        assert message in process.stderr, (args, process.stderr)
+    assert out.read_bytes() == kept
+    granlab("run", "--resume", str(out))
+    again = granlab("run", "--resume", str(out), check=False)
+    assert again.returncode == 2 and f"({str(tmp_path / 'run-resumed-2.h5')!r} is free)" in again.stderr
+    scene.write_text(PAIR.replace("duration = 0.5", "duration = 0.7"))
+    granlab("run", str(scene), "--out", str(out), "--force")
+    assert json.loads(granlab("info", str(out), "--json").stdout)["last_time"] == pytest.approx(0.7)

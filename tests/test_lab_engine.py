@@ -188,6 +188,26 @@ def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
     wait(lambda: engine.status()["preset"] == "block")
 
 
+def test_a_save_never_writes_over_a_file_nor_follows_a_link_planted_in_the_data_folder(engine, tmp_path):
+    outside = tmp_path.parent / f"{tmp_path.name}-outside.h5"
+    outside.write_bytes(b"precious")
+    for planted in ("victim.h5.part", ".victim.h5.part", "victim.part.h5", "taken.h5"):
+        (tmp_path / planted).symlink_to(outside)
+    wait(lambda: engine.status()["time"] > 0.0)
+    engine.submit("save", name="victim")
+    wait(lambda: (tmp_path / "victim.h5").exists())
+    assert outside.read_bytes() == b"precious" and not (tmp_path / "victim.h5").is_symlink()
+    assert h5md.summary(tmp_path / "victim.h5")["protocol"]["lab_preset"] == "ratchet16"
+    for name, allowed in (("taken", "a file inside the lab's data folder"),
+                          ("victim", "a name not yet in the data folder (victim-2.h5 is free)")):
+        seq = engine.messages.latest_seq
+        engine.submit("save", name=name)
+        wait(lambda: last_message(engine, seq))
+        assert last_message(engine, seq)[-1][1] == f"file name = {name} is not allowed: {allowed}"
+    assert outside.read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.is_symlink()) == ["victim.h5"]
+
+
 def test_refused_file_names_leave_the_data_folder_untouched(engine, tmp_path):
     seq = engine.messages.latest_seq
     engine.submit("save", name="../outside")

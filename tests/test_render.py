@@ -143,6 +143,12 @@ def test_a_movie_keeps_its_framing_while_the_pile_settles(pile, tmp_path):
 
     placed = [floor_and_sides(iio.imread(tmp_path / f"pile_{k:05d}.png")) for k in (2, 3, 4)]
     assert placed[0] == placed[1] == placed[2]
+    (tmp_path / "pile_00002.png").unlink()
+    kept = (tmp_path / "pile_00003.png").read_bytes()
+    assert _render(pile, "--out", out, "--frames", "2:5", "--size", "640x480") == 2  # pile_00003.png is there
+    assert (tmp_path / "pile_00003.png").read_bytes() == kept and not (tmp_path / "pile_00002.png").exists()
+    assert _render(pile, "--out", out, "--frames", "2:5", "--size", "640x480", "--force") == 0
+    assert iio.imread(tmp_path / "pile_00003.png").shape == (480, 640, 3)
     alone = floor_and_sides(render_image(_frame(pile, 4)[0], size=(800, 600)))
     assert alone[1][1] - alone[1][0] > placed[0][1][1] - placed[0][1][0] + 20
 

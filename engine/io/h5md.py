@@ -29,7 +29,7 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..errors import GranLabError
+from ..errors import GranLabError, OutputError
 from ..params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
 from ..state import STATUS_NAMES, ParticleState
@@ -119,17 +119,21 @@ class RunWriter:
     ``watch`` pairs ``(i, j)`` (``j >= N``: a wall) whose (F_n, F_t, status) are recorded by
     :meth:`write_contact_sample`. ``lab_series`` (name -> column names) makes the file a lab run:
     it holds those series (:meth:`write_series`) and the lab's settings at each frame
-    (``settings`` of :meth:`write_frame`). Use as a context manager.
+    (``settings`` of :meth:`write_frame`). An existing ``path`` (a symbolic link too) is
+    refused unless ``overwrite``. Use as a context manager.
     """
 
     def __init__(self, path: str | Path, sim: Simulation, scene: str = "", protocol: dict | None = None,
                  watch: list[tuple[int, int]] | None = None, author: str = "GranLab user",
-                 lab_series: dict[str, tuple[str, ...]] | None = None):
+                 lab_series: dict[str, tuple[str, ...]] | None = None, overwrite: bool = False):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         n = sim.particles.count
         nw = sim.walls.count
-        f = h5py.File(self.path, "w", libver="latest")
+        if not overwrite and (self.path.exists() or self.path.is_symlink()):
+            raise OutputError(f"run file {str(self.path)!r} exists: it is not written over unless asked")
+        # "w-" creates the file exclusively (O_EXCL), so a link put there meanwhile is not followed
+        f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest")
         self.file = f
         h5md = f.create_group("h5md")
         h5md.attrs["version"] = np.array([1, 1])

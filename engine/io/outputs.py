@@ -1,0 +1,53 @@
+"""Where results may be written: never over an input, never over an existing file unless the
+user says so (``--force``), and checked before any work starts."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from ..errors import OutputError
+
+
+def free_name(path: Path) -> Path:
+    """``path`` itself if nothing is there, else the first free ``STEM-2.SUFFIX``, ``STEM-3...``."""
+    candidate, number = path, 1
+    while candidate.exists() or candidate.is_symlink():
+        number += 1
+        candidate = path.with_name(f"{path.stem}-{number}{path.suffix}")
+    return candidate
+
+
+def check_output(path: str | Path, option: str = "--out", force: bool = False, inputs=(),
+                 folder: bool = False) -> Path:
+    """``path`` as a file (or with ``folder``, a folder) that may be written.
+
+    Refused, with a message naming ``option``: a file that is one of ``inputs``; an existing
+    file unless ``force``; a folder where a file is wanted (or the reverse); a place whose
+    nearest existing folder cannot be written."""
+    path = Path(path)
+    for given in inputs:
+        if path.exists() and Path(given).exists() and path.resolve() == Path(given).resolve():
+            raise OutputError(f"{option} {str(path)!r} is the input file: writing it would lose what it holds; "
+                              f"give another name ({str(free_name(path))!r} is free)")
+    if folder:
+        if path.exists() and not path.is_dir():
+            raise OutputError(f"{option} {str(path)!r} is a file, not a folder: give a folder for the run files")
+    elif path.is_dir():
+        raise OutputError(f"{option} {str(path)!r} is a folder: give a file name inside it")
+    elif (path.exists() or path.is_symlink()) and not force:
+        raise OutputError(f"{option} {str(path)!r} exists: give --force to write over it, or another name "
+                          f"({str(free_name(path))!r} is free)")
+    parent = path if folder else path.parent
+    existing = parent.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"{option} {str(path)!r} cannot be written: {str(existing)!r} is a file, not a folder")
+    try:  # a probe: permission bits do not tell (root, /proc, read-only mounts)
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as error:
+        raise OutputError(f"{option} {str(path)!r} cannot be written: no file can be made in {str(existing)!r} "
+                          f"({error.strerror or error})") from None
+    return path
