@@ -29,7 +29,7 @@ from pathlib import Path
 import numba
 
 from .analysis import ANALYSES, LOADS
-from .errors import GranLabError
+from .errors import DivergenceError, GranLabError
 from .io.jsonsafe import jsonable
 from .reproduce import REPRODUCTIONS
 
@@ -42,15 +42,23 @@ def _float(text: str) -> float:
 
 
 def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
-              resume: str | None = None, force: bool = False) -> dict:
+              resume: str | None = None, force: bool = False, checkpoint_frames: int = 10,
+              checkpoint_seconds: float = 60.0) -> dict:
     """Run a scene to its end (or continue a run file from its checkpoint); returns the final
-    state, energy budget and recorded series. With ``out`` a run file gets a frame every
-    ``frame_every`` steps (default: the scene's ``record_every``) and a checkpoint at the end.
-    ``out`` is never the resumed file, and an existing ``out`` is written over only with ``force``."""
+    state, energy budget and recorded series.
+
+    With ``out`` a run file gets a frame every ``frame_every`` steps (default: the scene's
+    ``record_every``; a resumed run keeps its file's) and a checkpoint with the frame every
+    ``checkpoint_frames`` frames or once ``checkpoint_seconds`` of wall time have passed since
+    the last, and at the end: a killed run resumes from the last one, bit for bit. A diverging
+    run writes its restored last good state as the last checkpoint. ``out`` is never the resumed
+    file, and an existing ``out`` is written over only with ``force``."""
     from .io import h5md
     from .io.outputs import check_output
     from .io.scene import load_scene, parse_scene
+    from .params import positive
 
+    positive("--checkpoint-seconds", checkpoint_seconds, allow_inf=True)
     start = time.perf_counter()
     if resume is not None and out is None:
         out = str(Path(resume).with_name(Path(resume).stem + "-resumed.h5"))
@@ -60,6 +68,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         sim, record = h5md.resume(resume)
         scene = parse_scene(record["scene"], origin=f"scene stored in {resume}")
         total = max(0, scene.step_count(sim.dt) - sim.step)
+        frame_every = frame_every or record.get("frame_every")
     else:
         scene = load_scene(name)
         if scene.threads:
@@ -68,8 +77,9 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
     every = frame_every or scene.record_every or total or 1
-    writer = h5md.RunWriter(out, sim, scene=scene.source, protocol={"command": "run", "scene": scene.title},
-                            overwrite=force) if out else None
+    writer = h5md.RunWriter(out, sim, scene=scene.source, overwrite=force,
+                            protocol={"command": "run", "scene": scene.title, "frame_every": every}) if out else None
+    last_checkpoint = {"frames": 0, "time": time.perf_counter()}
 
     def record():
         budget = sim.energy()
@@ -78,13 +88,24 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
             series[key].append(getattr(budget, key))
         if writer is not None:
             writer.write_frame(sim)
+            last_checkpoint["frames"] += 1
+            if (last_checkpoint["frames"] >= checkpoint_frames
+                    or time.perf_counter() - last_checkpoint["time"] >= checkpoint_seconds):
+                writer.write_checkpoint(sim)
+                last_checkpoint.update(frames=0, time=time.perf_counter())
 
     try:
         record()
         done = 0
         while done < total:
             block = min(every, total - done)
-            sim.run(block)
+            try:
+                sim.run(block)
+            except DivergenceError as error:
+                if writer is not None:
+                    writer.write_checkpoint(sim)
+                    error.args = (f"{error} It is the last checkpoint of {out}.",)
+                raise
             done += block
             record()
         if writer is not None:
@@ -362,8 +383,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", metavar="RUNFILE", help="continue a run file from its checkpoint to the end of its scene "
                                                          "(into --out, default RUNFILE-resumed.h5; never RUNFILE itself)")
     run.add_argument("--force", action="store_true", help="write over an existing --out file")
+    run.add_argument("--checkpoint-every", type=_positive_int, default=10, metavar="K",
+                     help="a checkpoint every K frames (default 10), so a killed run resumes from it")
+    run.add_argument("--checkpoint-seconds", type=_float, default=60.0, metavar="S",
+                     help="... or once S seconds of wall time have passed since the last (default 60)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
-    run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force),
+    run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force,
+                                                 a.checkpoint_every, a.checkpoint_seconds),
                      printer=_print_run)
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")

@@ -232,3 +232,47 @@ def test_bad_run_files_give_clear_errors(tmp_path):
             h5md.read_frame(f, 5)
     process = subprocess.run([sys.executable, "-m", "engine.cli", "info", str(text)], capture_output=True, text=True)
     assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
+
+
+def test_a_killed_cli_run_resumes_from_its_last_periodic_checkpoint_bit_for_bit(tmp_path):
+    scene_file = tmp_path / "long.toml"
+    scene_file.write_text(SCENE.replace("steps = 4000", "steps = 400000\nrecord_every = 4000"))
+    crash = tmp_path / "crash.h5"
+    command = [sys.executable, "-m", "engine.cli", "run", str(scene_file), "--json"]
+    process = subprocess.Popen(command + ["--out", str(crash), "--checkpoint-every", "2"], stdout=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120.0
+    step = 0
+    while step < 20000 and time.monotonic() < deadline:  # killed after its third checkpoint (4000, 12000, 20000)
+        time.sleep(0.02)
+        if crash.exists():
+            try:
+                step = h5md.summary(crash)["checkpoint_step"] or 0
+            except (h5md.RunFileError, OSError, KeyError):
+                pass
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert 20000 <= step < 400000 and step % 4000 == 0
+    resumed = json.loads(subprocess.run(command[:4] + ["--resume", str(crash), "--json"], capture_output=True,
+                                        text=True, timeout=600, check=True).stdout)
+    whole = json.loads(subprocess.run(command, capture_output=True, text=True, timeout=600, check=True).stdout)
+    assert resumed["steps"] == whole["steps"] == 400000
+    assert resumed["positions"] == whole["positions"] and resumed["omegas"] == whole["omegas"]
+    with h5md.open_run(tmp_path / "crash-resumed.h5") as f:
+        assert f["particles/all/position/step"][0] >= step and f["particles/all/position/step"][1] % 4000 == 0
+
+
+def test_a_diverging_cli_run_writes_its_restored_last_good_state_as_the_last_checkpoint(tmp_path):
+    scene_file = tmp_path / "heavy.toml"
+    scene_file.write_text(SCENE.replace("gravity = [0.0, -1.0]", "gravity = [0.0, -3e3]"))
+    out = tmp_path / "heavy.h5"
+    process = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(scene_file), "--out", str(out),
+                              "--frame-every", "10", "--checkpoint-every", "4"], capture_output=True, text=True,
+                             timeout=600)
+    assert process.returncode == 2
+    with h5md.open_run(out) as f:
+        dt = h5md.parameters(f)["dt"]
+    assert process.stderr.strip().endswith(f"above max_overlap = 0.5 (time step too large or stiffness too low). "
+                                           f"The simulation was restored to its last good state (t = {90 * dt:.6g}). "
+                                           f"It is the last checkpoint of {out}.")
+    info = h5md.summary(out)
+    assert info["checkpoint_step"] == info["last_step"] == 90  # periodic checkpoints were at steps 30 and 70
