@@ -409,6 +409,12 @@ class Simulation:
         if code == k_integrate.CODE_OVERLAP:
             return (f"an overlap reached {info[k_integrate.INFO_MAX_OVERLAP]:.3g} of a radius, above "
                     f"max_overlap = {self.integration.max_overlap} (time step too large or stiffness too low)")
+        if code == k_integrate.CODE_TUNNEL:
+            disk = int(info[k_integrate.INFO_MOVER])
+            speed = float(np.hypot(*self.particles.velocity[disk]))
+            return (f"disk {disk} moved {info[k_integrate.INFO_STEP_MOVE]:.3g} of its radius in one step (speed "
+                    f"{speed:.3g}, dt = {self.dt:.3g}), above max_overlap / 2 = {self.integration.max_overlap / 2:.3g}: "
+                    f"it could pass through a neighbour (time step too large for this speed)")
         if code == k_integrate.CODE_LOST_CONTACT:
             return (f"{int(info[k_integrate.INFO_LOST])} touching contact(s) left the neighbour list "
                     "at a rebuild (an internal inconsistency: please report it)")

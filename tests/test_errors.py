@@ -33,6 +33,13 @@ def test_invalid_contact_law_names_parameter_value_and_allowed(field, value, all
     assert error.value.name == field
 
 
+def test_cohesion_without_a_range_is_refused():
+    with pytest.raises(ParameterError, match=r"cohesion_range = 0.0 is not allowed: a range > 0 with "
+                                             r"cohesion_force = 0.3"):
+        ContactLaw(cohesion_force=0.3)
+    assert ContactLaw(cohesion_force=0.3, cohesion_range=0.01).cohesion_range == 0.01
+
+
 def test_invalid_radius_and_positions():
     with pytest.raises(ParameterError, match=r"radius\[1\] = 0.0 is not allowed: a positive radius"):
         ParticleState([[0, 0], [3, 0]], [1.0, 0.0])
@@ -85,7 +92,9 @@ def test_overlap_divergence_stops_and_keeps_last_good_state():
     good = sim.particles.position.copy()
     good_time = sim.time
     sim.set_gravity(0.0, -1e5)
-    with pytest.raises(DivergenceError, match=r"an overlap reached .* of a radius, above max_overlap = 0.5"):
+    # the overlap check, or the step-length check that sees the same blow-up a step sooner
+    with pytest.raises(DivergenceError, match=r"an overlap reached .* of a radius, above max_overlap = 0.5|"
+                                              r"moved .* of its radius in one step"):
         sim.run(5000)
     assert sim.time == good_time
     np.testing.assert_array_equal(sim.particles.position, good)
@@ -94,12 +103,31 @@ def test_overlap_divergence_stops_and_keeps_last_good_state():
     assert sim.time > good_time
 
 
+@pytest.mark.parametrize("block", [1, 1000])
+def test_a_disk_that_would_tunnel_through_another_stops_the_run_naming_it(block):
+    """Two disks head-on at +-1e4 with dt = 1e-3 move 20 radii a step: without the check they
+    pass through each other and never touch."""
+    particles = ParticleState([[-50.0, 0.0], [50.0, 0.0]], [0.5, 0.5], velocity=[[1e4, 0.0], [-1e4, 0.0]])
+    sim = Simulation(particles, ContactLaw(), Integration(dt=1e-3))
+    with pytest.raises(DivergenceError) as error:
+        for _ in range(1000 // block):
+            sim.run(block)
+    assert error.value.reason == ("disk 0 moved 20 of its radius in one step (speed 1e+04, dt = 0.001), above "
+                                  "max_overlap / 2 = 0.25: it could pass through a neighbour (time step too large "
+                                  "for this speed)")
+    np.testing.assert_array_equal(sim.particles.position, [[-50.0, 0.0], [50.0, 0.0]])
+    slow = Simulation(ParticleState([[-1.0, 0.0], [1.0, 0.0]], [0.5, 0.5], velocity=[[1.0, 0.0], [-1.0, 0.0]]),
+                      ContactLaw(), Integration(dt=1e-3))
+    slow.run(2000)  # 0.002 of a radius a step: they collide and bounce
+    assert slow.particles.velocity[0, 0] < 0
+
+
 def test_nan_divergence_stops_and_keeps_last_good_state():
     sim = _dense_box()
     sim.run(100)
     good = sim.particles.velocity.copy()
     sim.set_gravity(0.0, -1e308)
-    with pytest.raises(DivergenceError, match="NaN or infinite"):
+    with pytest.raises(DivergenceError, match="NaN or infinite|moved .* of its radius in one step"):
         sim.run(50)
     np.testing.assert_array_equal(sim.particles.velocity, good)
     sim.set_gravity(0.0, -1.0)

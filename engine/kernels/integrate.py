@@ -28,7 +28,7 @@ from .jit import JIT, KERNEL, PARALLEL
 from .laws import D0
 from .neighbours import build_table, copy_table
 
-CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP, CODE_REBUILD = range(6)
+CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP, CODE_REBUILD, CODE_TUNNEL = range(7)
 
 # energy tallies accumulated over the run (work done on the disks is positive)
 (E_DAMPING, E_SLIDING, E_ROLLING, E_OPENING, E_WALL_WORK, E_CELL_WORK, E_PRESCRIBED_WORK,
@@ -38,7 +38,8 @@ ENERGY_TALLY_SIZE = 8
 # results of a particle pass
 G_KINETIC_X, G_KINETIC_Y, G_PRESCRIBED, G_EXTERNAL, G_DISPLACEMENT, G_BAD = range(6)
 G_VXX, G_VXY, G_VYX, G_VYY = 6, 7, 8, 9
-GATHER_SIZE = 10
+G_STEP_MOVE, G_MOVER = 10, 11
+GATHER_SIZE = 12
 
 # flags
 FLAG_REBUILD, FLAG_PHASE = 0, 1
@@ -46,8 +47,8 @@ FLAG_SIZE = 2
 PHASE_ON_STEP, PHASE_DRIFTED = 0, 1
 
 # info written by advance
-INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS = range(5)
-INFO_SIZE = 5
+INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS, INFO_MOVER, INFO_STEP_MOVE = range(7)
+INFO_SIZE = 7
 
 
 @njit(**KERNEL)
@@ -68,7 +69,7 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
     distance of a disk from its neighbour-list ``reference``, the number of non-finite disks,
-    and the virial sums. With ``n_chunks > 1`` the disks are split among threads, each
+    the virial sums, and the largest drift of a disk in radii, with that disk. With ``n_chunks > 1`` the disks are split among threads, each
     filling a row of ``partial (T, GATHER_SIZE)``.
     """
     n = p.position.shape[0]
@@ -81,11 +82,14 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
     for k in range(GATHER_SIZE):
         out[k] = 0.0
     for c in range(n_chunks):
-        for k in range(GATHER_SIZE):
+        for k in range(G_STEP_MOVE):
             if k == G_DISPLACEMENT:
                 out[k] = max(out[k], partial[c, k])
             else:
                 out[k] += partial[c, k]
+        if partial[c, G_STEP_MOVE] > out[G_STEP_MOVE]:
+            out[G_STEP_MOVE] = partial[c, G_STEP_MOVE]
+            out[G_MOVER] = partial[c, G_MOVER]
 
 
 @njit(**PARALLEL)
@@ -120,6 +124,8 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     prescribed = 0.0
     external = 0.0
     displacement = 0.0
+    step_move = 0.0
+    mover = 0
     vxx = 0.0
     vxy = 0.0
     vyx = 0.0
@@ -190,6 +196,11 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
         dx = x - reference[i, 0]
         dy = y - reference[i, 1]
         displacement = max(displacement, dx * dx + dy * dy)
+        r = p.radius[i]
+        move = drift * math.hypot(vx, vy) / r  # hypot: no overflow before the NaN check sees a blow-up
+        if move > step_move:
+            step_move = move
+            mover = i
         if not math.isfinite(vx + vy + w + x + y):
             bad += 1
     out[G_KINETIC_X] = kinetic_x
@@ -202,6 +213,8 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     out[G_VXY] = vxy
     out[G_VYX] = vyx
     out[G_VYY] = vyy
+    out[G_STEP_MOVE] = step_move
+    out[G_MOVER] = mover
 
 
 @njit(**KERNEL)
@@ -367,6 +380,10 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
     scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
         _start(p, w, cell, ws, gravity, has_loads, dt, time_origin + step_offset * dt, skin, n_chunks, scale)
+        if ws.gather[G_BAD] > 0:
+            return 0, CODE_NAN
+        if _tunnels(ws, max_overlap):
+            return 0, CODE_TUNNEL
     step = 0
     while True:
         if ws.flags[FLAG_REBUILD]:
@@ -377,6 +394,18 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
                             time_origin, step_offset, step, n_steps, skin, max_overlap, n_chunks, scale)
         if code != CODE_REBUILD:
             return step, code
+
+
+@njit(**KERNEL)
+def _tunnels(ws, max_overlap):
+    """Whether the last drift moved a disk further than ``max_overlap / 2`` of its radius: it
+    could then meet a neighbour head-on at an overlap above ``max_overlap``, or pass through it
+    between two steps. Records the disk and its move in ``ws.info``."""
+    if not ws.gather[G_STEP_MOVE] > 0.5 * max_overlap:
+        return False
+    ws.info[INFO_MOVER] = ws.gather[G_MOVER]
+    ws.info[INFO_STEP_MOVE] = ws.gather[G_STEP_MOVE]
+    return True
 
 
 @njit(**KERNEL)
@@ -416,6 +445,8 @@ def _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has
             return step, CODE_NAN
         if ws.info[INFO_OVERLAPPING] > 0:
             return step, CODE_OVERLAP
+        if _tunnels(ws, max_overlap):
+            return step, CODE_TUNNEL
         if last:
             return step, CODE_OK
         if _needs_rebuild(w, cell, ws, skin):
