@@ -137,7 +137,8 @@ def _print_run(result: dict) -> None:
     first = result["series"]["balance"][0]
     drift = energy["balance"] - first
     scale = max(abs(first), 1e-300)
-    print(f"  energy balance: {energy['balance']:.6g} (drift {drift:.3g}, {drift / scale:.2e} relative)")
+    order = "first order in dt: viscous damping" if energy["dissipated_damping"] else "second order in dt"
+    print(f"  energy balance: {energy['balance']:.6g} (drift {drift:.3g}, {drift / scale:.2e} relative; {order})")
     if result["run_file"]:
         print(f"  run file: {result['run_file']}")
 

@@ -127,6 +127,11 @@ class ContactLaw(_Replaceable):
         choice("tangential_model", self.tangential_model, TANGENTIAL_MODELS)
         set_(self, "cohesion_force", nonnegative("cohesion_force", self.cohesion_force))
         set_(self, "cohesion_range", nonnegative("cohesion_range", self.cohesion_range))
+        if self.cohesion_force > 0 and self.cohesion_range == 0:
+            # F0 would pull at contact and vanish at once on opening: work done on no path
+            raise ParameterError("cohesion_range", 0.0, f"a range > 0 with cohesion_force = {self.cohesion_force:g} "
+                                                        "(the attraction falls from F0 to 0 over it; or "
+                                                        "cohesion_force = 0)")
         set_(self, "rolling_stiffness", nonnegative("rolling_stiffness", self.rolling_stiffness))
         set_(self, "rolling_friction", nonnegative("rolling_friction", self.rolling_friction, allow_inf=True))
         set_(self, "rolling_damping_ratio", nonnegative("rolling_damping_ratio", self.rolling_damping_ratio))

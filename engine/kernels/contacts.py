@@ -242,17 +242,21 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 trial = 0.0
             else:
                 trial = tangential_spring[k] + rate * dt
+            previous = 0.0 if fresh else tangential_spring[k]
             spring, ft, state, slip = coulomb(kt, mu, gamma_t, ne, trial, rate)
             if state == STATUS_STICK:
                 damping -= (ft + kt * spring) * rate * dt
             else:
-                sliding += abs(ft * slip)
+                # the elastic force of the step before and of this one, averaged as velocity
+                # Verlet averages them in the kinetic energy: first-order errors cancel
+                sliding += 0.5 * kt * (previous + spring) * slip
                 anchor_i[k] += 0.5 * slip / ri
                 anchor_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
             tangential_spring[k] = spring
             status[k] = state
             if kr > 0.0:
-                roll_trial = 0.0 if fresh else rolling_spring[k] + relative_spin * dt
+                previous_roll = 0.0 if fresh else rolling_spring[k]
+                roll_trial = previous_roll + relative_spin * dt
                 gamma_r = 0.0
                 inv_reduced = inv_inertia[i] + (0.0 if is_wall else inv_inertia[j])
                 if gamma_r_factor > 0.0 and inv_reduced > 0.0:
@@ -260,7 +264,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 roll, moment, roll_slip = rolling(kr, mu_r, gamma_r, ne, roll_trial, relative_spin)
                 if roll_slip == 0.0:
                     damping -= (moment + kr * roll) * relative_spin * dt
-                rolling_loss += abs(moment * roll_slip)
+                rolling_loss += 0.5 * kr * (previous_roll + roll) * roll_slip
                 rolling_spring[k] = roll
         elif f0 > 0.0:
             opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
