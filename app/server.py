@@ -22,6 +22,7 @@ from pathlib import Path
 
 import panel as pn
 import tornado.web
+from bokeh.settings import settings as bokeh_settings
 
 from engine.errors import GranLabError
 from engine.io.jsonsafe import jsonable
@@ -60,6 +61,9 @@ class Lab:
         self._stop = threading.Event()
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
         self.port = port or _free_port(host)
+        # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
+        # environment holds (cdn would point every stylesheet at cdn.holoviz.org)
+        bokeh_settings.resources.set_value("server")
         origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
         self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
                                show=False, start=False, title="GranLab", threaded=False, verbose=False,
