@@ -157,7 +157,7 @@ class Dashboard:
         self.record_seconds = W.FloatInput(name="of the last (simulated time)", value=20.0, step=5.0,
                                            css_classes=["record-seconds"], **wide)
         self.record = W.Button(name="Record movie", css_classes=["record-button"], **wide)
-        self.timeline = W.IntSlider(name="Frame", start=0, end=1, value=0, css_classes=["replay-slider"],
+        self.timeline = W.IntSlider(name="Frame", start=1, end=2, value=1, css_classes=["replay-slider"],
                                     sizing_mode="stretch_width")
 
         self.preset.param.watch(lambda e: e.new in PRESETS and self._command("preset", name=e.new), "value")
@@ -186,7 +186,7 @@ class Dashboard:
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
         self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
                                                      seconds=self.record_seconds.value, color=self.scene.color_field))
-        self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new)), "value_throttled")
+        self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
 
     def _friction(self) -> None:
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
@@ -422,9 +422,9 @@ class Dashboard:
             self._replay_shown = (frame, frames)
             self._syncing = True
             try:
-                if self.timeline.end != max(1, frames - 1):
-                    self.timeline.end = max(1, frames - 1)
-                self.timeline.value = frame
+                if self.timeline.end != max(2, frames):  # frames counted from 1, as the label beside it
+                    self.timeline.end = max(2, frames)
+                self.timeline.value = frame + 1
             finally:
                 self._syncing = False
             self.timeline_label.object = (f"<div style='font-size:13px;padding-top:18px'>frame {frame + 1} of "

@@ -40,7 +40,7 @@ from engine.io.jsonsafe import jsonable
 from engine.io.outputs import free_name
 from engine.params import positive
 from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset,
-                                      pair_label, preset_settings)
+                                      pair_label, preset_settings, strain_fit)
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
@@ -126,7 +126,18 @@ class Replay:
         self.series: dict[str, tuple[tuple[str, ...], np.ndarray]] = {
             "replay": (("t", "step") + fields, np.column_stack([self.times, steps, energy]))}
         self.series.update(lab)
+        self.watched = [tuple(pair) for pair in protocol.get("watched", [])]
+        self.watched_labels = list(protocol.get("watched_labels", []))
         self.index = 0
+
+    def _strain_fit(self, until: float) -> dict | None:
+        """The strain fit of the cycles recorded up to ``until``, as the preset showed it."""
+        if "cycles" not in self.series or self.of is None:
+            return None
+        columns, rows = self.series["cycles"]
+        rows = rows[rows[:, columns.index("t")] <= until]
+        pairs = list(zip(rows[:, columns.index("cycle")].astype(int), rows[:, columns.index("gamma")]))
+        return strain_fit(pairs, getattr(PRESETS[self.of], "reference_cycle", 0))
 
     def settings(self, index: int) -> dict | None:
         text = self.frames[index].get("lab_settings_json")
@@ -147,6 +158,8 @@ class Replay:
                 "stage": f"frame {self.index + 1} of {self.count}", "time": frame["time"], "step": frame["step"],
                 "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
                 "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed, "window": 0.0,
+                "watched": [list(pair) for pair in self.watched], "watched_labels": self.watched_labels,
+                "strain": self._strain_fit(frame["time"]),
                 "replay": {"of": self.of, "frame": self.index, "frames": self.count,
                            "start": float(self.times[0]), "end": float(self.times[-1])}}
 
@@ -331,7 +344,11 @@ class LabEngine:
 
     def _preset_only(self, what: str) -> Preset:
         if not isinstance(self.source, Preset):
-            raise ParameterError(what, self.source.name, "a running preset (a replay shows a file as it was saved)")
+            verb = {"save": "Save", "record": "Record", "watch": "Watching a contact",
+                    "controls": "Changing a setting"}.get(what, what)
+            raise GranLabError(f"{verb} works on a running preset, not on a replay ({self.source.path.name} is "
+                               f"already a file): choose a preset first (a movie of a replay: granlab render "
+                               f"{self.source.path.name} --out movie.gif)")
         return self.source
 
     def _preset_name(self) -> str:
@@ -488,7 +505,7 @@ class LabEngine:
         source = self.source
         if isinstance(source, Replay):
             if frame:
-                parts = ([(source.data(), (0.0, 0.0))], None)
+                parts = ([(source.data(), (0.0, 0.0))], [source.watched])
             status = source.status()
         else:
             views = source.views()
@@ -536,8 +553,11 @@ class LabEngine:
         frames = list(self._history)
         if frames[-1][0].step != sim.step:
             frames.append((sim.snapshot(), settings_json(preset.settings)))
+        names = (sim.particles.count, sim.walls.names)
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
-                    "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time()}
+                    "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time(),
+                    "watched": [list(pair) for pair in preset.watched()],
+                    "watched_labels": [pair_label(pair, *names) for pair in preset.watched()]}
         partial = partial_file(path)
         try:
             with h5md.RunWriter(partial, sim, protocol=jsonable(protocol), lab_series=dict(preset.series),

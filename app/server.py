@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import logging
 import re
 import socket
 import subprocess
@@ -22,6 +23,8 @@ from pathlib import Path
 
 import panel as pn
 import tornado.web
+import tornado.websocket
+from tornado.iostream import StreamClosedError
 from bokeh.settings import settings as bokeh_settings
 
 from engine.errors import GranLabError
@@ -127,6 +130,18 @@ def _free_port(host: str) -> int:
         return sock.getsockname()[1]
 
 
+class ClosedTabFilter(logging.Filter):
+    """Drops the warnings and tracebacks of a message sent to a tab that just closed: a closed
+    tab is normal in a classroom, and the terminal the lab runs in should stay readable."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        closed = (tornado.websocket.WebSocketClosedError, StreamClosedError)
+        if record.exc_info and isinstance(record.exc_info[1], closed):
+            return False
+        message = record.getMessage()
+        return "connection was closed" not in message and "WebSocketClosedError" not in message
+
+
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
           **changes) -> None:
     """Start the lab and serve until interrupted (prints the URL). ``changes``: settings of the
@@ -134,6 +149,8 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     if host not in LOCAL_HOSTS:
         print(f"warning: serving on {host}: the lab has no authentication; anyone who can reach this address "
               "can control the simulation and write files in its data folder", file=sys.stderr)
+    for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
+        logging.getLogger(name).addFilter(ClosedTabFilter())
     print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, **changes)
     print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)

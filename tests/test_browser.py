@@ -268,11 +268,18 @@ def test_save_then_replay_with_a_timeline(page, lab):
     wait_status(lab, lambda t: t["replay"]["frame"] == s["replay"]["frame"] + 1)
     # the plots show the saved series up to the frame: at the end, the strain per cycle and the cone paths
     handle = page.locator(".replay-slider .noUi-handle")
-    expect(handle).to_have_attribute("aria-valuenow", f"{s['replay']['frame'] + 1}.0", timeout=30000)  # shown
+    expect(handle).to_have_attribute("aria-valuenow", f"{s['replay']['frame'] + 2}.0", timeout=30000)  # from 1
     track = page.locator(".replay-slider .noUi-base").bounding_box()
     page.mouse.click(track["x"] + 0.97 * track["width"], track["y"] + track["height"] / 2)
     wait_status(lab, lambda s: s["replay"]["frame"] >= 0.9 * (s["replay"]["frames"] - 1))
     wait_model(page, "coulomb-cone-paths", "m.data.x0.length > 10")
+    # each watched contact keeps its own colour and its name (a wall by name) as in the run
+    replayed = status(lab)
+    assert replayed["watched_labels"] and len(replayed["watched_labels"]) == len(replayed["watched"])
+    wait_model(page, "coulomb-cone-paths", "new Set(m.data.color).size >= 2")
+    colors = model(page, "coulomb-cone-paths", "[...new Set(m.data.color)]")
+    labels = model(page, "coulomb-cone-paths", "[...new Set(m.data.label)]")
+    assert len(colors) == len(labels) and set(labels) <= set(replayed["watched_labels"])
     expect(page.locator(".amplitude-input input")).to_be_disabled()
 
 

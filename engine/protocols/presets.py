@@ -631,16 +631,22 @@ class RatchetPreset(Preset):
         return out
 
     def _strain_fit(self) -> dict | None:
-        """The fitted strain per cycle from the reference cycle on (None before three cycles):
-        the line passes through the mean of the fitted points."""
-        if self.verdict is None:
-            return None
-        v = self.verdict
-        cycles = [c for c, _ in self._cycle_gamma if c >= self.reference_cycle]
-        gamma_ref = dict(self._cycle_gamma)[self.reference_cycle]
-        return {"reference_cycle": self.reference_cycle, "gamma_ref": gamma_ref, "dgamma": v.dgamma,
-                "rms": v.rms_deviation, "ratcheting": v.ratcheting, "cycles_used": v.cycles_used,
-                "mean_cycle": float(np.mean(cycles)), "mean_gamma": float(np.mean(v.gamma))}
+        return strain_fit(self._cycle_gamma, self.reference_cycle, self.verdict)
+
+
+def strain_fit(cycle_gamma, reference_cycle: int, verdict=None) -> dict | None:
+    """The strain per cycle fitted from ``reference_cycle`` on, given (cycle, γ) pairs (None
+    before three cycles); the line passes through the mean of the fitted points. ``verdict``:
+    the :func:`ratchet_verdict` of those cycles if already known (a preset keeps it)."""
+    used = [(c, g) for c, g in cycle_gamma if c >= reference_cycle]
+    if len(used) < 3:
+        return None
+    cycles, gammas = np.array(used, dtype=float).T
+    v = verdict or ratchet_verdict(cycles, gammas)
+    gamma_ref = dict(cycle_gamma)[reference_cycle]
+    return {"reference_cycle": reference_cycle, "gamma_ref": gamma_ref, "dgamma": v.dgamma,
+            "rms": v.rms_deviation, "ratcheting": v.ratcheting, "cycles_used": v.cycles_used,
+            "mean_cycle": float(np.mean(cycles)), "mean_gamma": float(np.mean(v.gamma))}
 
 
 class Ratchet16Preset(RatchetPreset):
