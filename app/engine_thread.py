@@ -19,8 +19,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import queue
 import os
+import queue
 import re
 import tempfile
 import threading
@@ -37,7 +37,7 @@ from engine.analysis.states import PackingState, read_state
 from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io import h5md
 from engine.io.jsonsafe import jsonable
-from engine.io.outputs import free_name
+from engine.io.outputs import free_name, occupied
 from engine.params import positive
 from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset,
                                       pair_label, preset_settings, strain_fit)
@@ -75,7 +75,7 @@ def new_file(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
     """:func:`safe_path` for a file to be written: a name already in the data folder is refused
     (the lab never writes over a file), with a free name suggested."""
     path = safe_path(data_dir, name, suffix)
-    if path.exists() or path.is_symlink():
+    if occupied(path):
         raise ParameterError("file name", name, f"a name not yet in the data folder ({free_name(path).name} is free)")
     return path
 
@@ -128,6 +128,7 @@ class Replay:
         self.series.update(lab)
         self.watched = [tuple(pair) for pair in protocol.get("watched", [])]
         self.watched_labels = list(protocol.get("watched_labels", []))
+        self._fit: tuple[int, dict | None] = (-1, None)
         self.index = 0
 
     def _strain_fit(self, until: float) -> dict | None:
@@ -135,9 +136,11 @@ class Replay:
         if "cycles" not in self.series or self.of is None:
             return None
         columns, rows = self.series["cycles"]
-        rows = rows[rows[:, columns.index("t")] <= until]
-        pairs = list(zip(rows[:, columns.index("cycle")].astype(int), rows[:, columns.index("gamma")]))
-        return strain_fit(pairs, getattr(PRESETS[self.of], "reference_cycle", 0))
+        count = int(np.count_nonzero(rows[:, columns.index("t")] <= until))
+        if self._fit[0] != count:  # status is read at every frame shown; the fit changes only with a cycle
+            pairs = list(zip(rows[:count, columns.index("cycle")].astype(int), rows[:count, columns.index("gamma")]))
+            self._fit = (count, strain_fit(pairs, getattr(PRESETS[self.of], "reference_cycle", 0)))
+        return self._fit[1]
 
     def settings(self, index: int) -> dict | None:
         text = self.frames[index].get("lab_settings_json")

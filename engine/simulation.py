@@ -411,8 +411,9 @@ class Simulation:
                     f"max_overlap = {self.integration.max_overlap} (time step too large or stiffness too low)")
         if code == k_integrate.CODE_TUNNEL:
             disk = int(info[k_integrate.INFO_MOVER])
-            speed = float(np.hypot(*self.particles.velocity[disk]))
-            return (f"disk {disk} moved {info[k_integrate.INFO_STEP_MOVE]:.3g} of its radius in one step (speed "
+            speed = float(np.hypot(*self.particles.velocity[disk]))  # the kernel's square may overflow
+            return (f"disk {disk} moved {speed * self.dt / self.particles.radius[disk]:.3g} of its radius in one "
+                    f"step (speed "
                     f"{speed:.3g}, dt = {self.dt:.3g}), above max_overlap / 2 = {self.integration.max_overlap / 2:.3g}: "
                     f"it could pass through a neighbour (time step too large for this speed)")
         if code == k_integrate.CODE_LOST_CONTACT:

@@ -16,9 +16,7 @@ def granlab(*args, check=True):
     return process
 
 
-def test_run_json_reports_final_state_in_input_order_and_energy(tmp_path):
-    scene = tmp_path / "pair.toml"
-    scene.write_text("""
+PAIR = """
 [simulation]
 duration = 3.0
 dt = 1e-4
@@ -35,7 +33,12 @@ x = 2.0
 y = 0.0
 r = 0.5
 mass = 3.0
-""")
+"""
+
+
+def test_run_json_reports_final_state_in_input_order_and_energy(tmp_path):
+    scene = tmp_path / "pair.toml"
+    scene.write_text(PAIR)
     result = json.loads(granlab("run", str(scene), "--json").stdout)
     positions = np.array(result["positions"])
     assert positions.shape == (2, 2)
@@ -85,21 +88,6 @@ def test_errors_exit_with_status_2_and_name_the_problem(tmp_path):
     assert bad_mu.returncode == 2 and "mu = inf is not allowed" in bad_mu.stderr
 
 
-PAIR = """
-[simulation]
-duration = 0.5
-dt = 1e-3
-[[particles.disk]]
-x = 0.0
-y = 0.0
-r = 0.5
-vx = 1.0
-[[particles.disk]]
-x = 2.0
-y = 0.0
-r = 0.5
-"""
-
 
 def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(tmp_path):
     scene = tmp_path / "pair.toml"
@@ -128,6 +116,6 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     granlab("run", "--resume", str(out))
     again = granlab("run", "--resume", str(out), check=False)
     assert again.returncode == 2 and f"({str(tmp_path / 'run-resumed-2.h5')!r} is free)" in again.stderr
-    scene.write_text(PAIR.replace("duration = 0.5", "duration = 0.7"))
+    scene.write_text(PAIR.replace("duration = 3.0", "duration = 3.5"))
     granlab("run", str(scene), "--out", str(out), "--force")
-    assert json.loads(granlab("info", str(out), "--json").stdout)["last_time"] == pytest.approx(0.7)
+    assert json.loads(granlab("info", str(out), "--json").stdout)["last_time"] == pytest.approx(3.5)

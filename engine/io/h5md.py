@@ -33,6 +33,7 @@ from ..errors import GranLabError, OutputError
 from ..params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
 from ..state import STATUS_NAMES, ParticleState
+from .outputs import occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
                  "dissipated_sliding", "dissipated_rolling", "dissipated_opening", "work_walls", "work_cell",
@@ -130,7 +131,7 @@ class RunWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         n = sim.particles.count
         nw = sim.walls.count
-        if not overwrite and (self.path.exists() or self.path.is_symlink()):
+        if not overwrite and occupied(self.path):
             raise OutputError(f"run file {str(self.path)!r} exists: it is not written over unless asked")
         # "w-" creates the file exclusively (O_EXCL), so a link put there meanwhile is not followed
         f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest")

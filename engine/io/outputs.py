@@ -9,10 +9,15 @@ from pathlib import Path
 from ..errors import OutputError
 
 
+def occupied(path: Path) -> bool:
+    """Whether something is at ``path``: a file, a folder, or a link (even one leading nowhere)."""
+    return path.exists() or path.is_symlink()
+
+
 def free_name(path: Path) -> Path:
     """``path`` itself if nothing is there, else the first free ``STEM-2.SUFFIX``, ``STEM-3...``."""
     candidate, number = path, 1
-    while candidate.exists() or candidate.is_symlink():
+    while occupied(candidate):
         number += 1
         candidate = path.with_name(f"{path.stem}-{number}{path.suffix}")
     return candidate
@@ -35,7 +40,7 @@ def check_output(path: str | Path, option: str = "--out", force: bool = False, i
             raise OutputError(f"{option} {str(path)!r} is a file, not a folder: give a folder for the run files")
     elif path.is_dir():
         raise OutputError(f"{option} {str(path)!r} is a folder: give a file name inside it")
-    elif (path.exists() or path.is_symlink()) and not force:
+    elif occupied(path) and not force:
         raise OutputError(f"{option} {str(path)!r} exists: give --force to write over it, or another name "
                           f"({str(free_name(path))!r} is free)")
     parent = path if folder else path.parent

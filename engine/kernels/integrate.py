@@ -47,8 +47,8 @@ FLAG_SIZE = 2
 PHASE_ON_STEP, PHASE_DRIFTED = 0, 1
 
 # info written by advance
-INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS, INFO_MOVER, INFO_STEP_MOVE = range(7)
-INFO_SIZE = 7
+INFO_NEEDED, INFO_LOST, INFO_OVERLAPPING, INFO_MAX_OVERLAP, INFO_REBUILDS, INFO_MOVER = range(6)
+INFO_SIZE = 6
 
 
 @njit(**KERNEL)
@@ -124,7 +124,8 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     prescribed = 0.0
     external = 0.0
     displacement = 0.0
-    step_move = 0.0
+    mover_move2 = 0.0  # the largest drift² / radius² so far, as a fraction: no division per disk
+    mover_r2 = 1.0
     mover = 0
     vxx = 0.0
     vxy = 0.0
@@ -197,9 +198,10 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
         dy = y - reference[i, 1]
         displacement = max(displacement, dx * dx + dy * dy)
         r = p.radius[i]
-        move = drift * math.hypot(vx, vy) / r  # hypot: no overflow before the NaN check sees a blow-up
-        if move > step_move:
-            step_move = move
+        move2 = drift * drift * (vx * vx + vy * vy)
+        if move2 * mover_r2 > mover_move2 * (r * r):
+            mover_move2 = move2
+            mover_r2 = r * r
             mover = i
         if not math.isfinite(vx + vy + w + x + y):
             bad += 1
@@ -213,7 +215,7 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     out[G_VXY] = vxy
     out[G_VYX] = vyx
     out[G_VYY] = vyy
-    out[G_STEP_MOVE] = step_move
+    out[G_STEP_MOVE] = math.sqrt(mover_move2 / mover_r2)
     out[G_MOVER] = mover
 
 
@@ -400,11 +402,10 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
 def _tunnels(ws, max_overlap):
     """Whether the last drift moved a disk further than ``max_overlap / 2`` of its radius: it
     could then meet a neighbour head-on at an overlap above ``max_overlap``, or pass through it
-    between two steps. Records the disk and its move in ``ws.info``."""
+    between two steps. Records the disk in ``ws.info``."""
     if not ws.gather[G_STEP_MOVE] > 0.5 * max_overlap:
         return False
     ws.info[INFO_MOVER] = ws.gather[G_MOVER]
-    ws.info[INFO_STEP_MOVE] = ws.gather[G_STEP_MOVE]
     return True
 
 
