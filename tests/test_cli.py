@@ -119,3 +119,24 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     scene.write_text(PAIR.replace("duration = 3.0", "duration = 3.5"))
     granlab("run", str(scene), "--out", str(out), "--force")
     assert json.loads(granlab("info", str(out), "--json").stdout)["last_time"] == pytest.approx(3.5)
+
+
+def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, capsys):
+    import h5py
+
+    from engine import cli
+
+    scene = tmp_path / "pair.toml"
+    scene.write_text(PAIR)
+    out = tmp_path / "run.h5"
+    granlab("run", str(scene), "--out", str(out))
+    with h5py.File(out, "r+") as f:
+        f["particles/all/position/value"][-1, 1] = np.nan
+        frames = f["particles/all/position/value"].shape[0]
+    for analysis in ("stiffness", "status", "rigidity", "packing", "fractal"):
+        assert cli.main(["analyze", str(out), analysis]) == 2
+        error = capsys.readouterr().err
+        assert error == (f"granlab analyze: error: {out} frame {frames - 1} has non-finite positions or radii "
+                         "(disk 1 of 2): the run had diverged when it was written; analyse an earlier frame "
+                         "(--frame)\n"), analysis
+    assert cli.main(["analyze", str(out), "packing", "--frame", "0"]) == 0

@@ -84,9 +84,23 @@ def read_state(path: str | Path, frame: int = -1, friction: float | None = None,
             state = _generic_state(f, frame, str(path), gap)
     if state.disks == 0:
         raise RunFileError(f"frame {frame} of {str(path)!r} holds no disks: nothing to analyse")
+    _check_finite(state)
     if friction is not None:
         state = dataclasses.replace(state, law=state.law.replace(friction=friction))
     return state
+
+
+def _check_finite(state: PackingState) -> None:
+    """A frame written as a run diverged holds NaN or infinite values: every analysis of it would
+    be meaningless (a singular stiffness matrix, numbers from NaN), so it is refused by name."""
+    bad = np.flatnonzero(~np.all(np.isfinite(state.positions), axis=1) | ~(np.isfinite(state.radii) & (state.radii > 0)))
+    if bad.size:
+        shown = ", ".join(str(i) for i in bad[:5]) + (f" and {bad.size - 5} more" if bad.size > 5 else "")
+        raise RunFileError(f"{state.source} has non-finite positions or radii (disk {shown} of {state.disks}): "
+                           "the run had diverged when it was written; analyse an earlier frame (--frame)")
+    if not (np.all(np.isfinite(state.box_lengths)) and np.all(np.isfinite(state.cell_lengths))):
+        raise RunFileError(f"{state.source} has a non-finite box: the run had diverged when it was written; "
+                           "analyse an earlier frame (--frame)")
 
 
 def _granlab_state(f: h5py.File, index: int, path: str) -> PackingState:
