@@ -9,6 +9,7 @@ address is printed.
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import json
 import logging
@@ -29,6 +30,7 @@ from bokeh.settings import settings as bokeh_settings
 
 from engine.errors import GranLabError
 from engine.io.jsonsafe import jsonable
+from engine.io.outputs import check_output
 
 from .dashboard import Dashboard
 from .engine_thread import LabEngine
@@ -130,6 +132,27 @@ def _free_port(host: str) -> int:
         return sock.getsockname()[1]
 
 
+def check_address(host: str, port: int) -> None:
+    """Refuse, before the engine starts, an address the lab could not serve on: a port out of range,
+    a host name that does not resolve or is not this machine's, a port another program holds."""
+    if not 0 <= port <= 65535:
+        raise GranLabError(f"--port {port} is not allowed: a port from 1 to 65535, or 0 for any free port")
+    try:
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+    except (socket.gaierror, UnicodeError) as error:
+        raise GranLabError(f"--host {host!r} is not an address of this machine: {error} (127.0.0.1 serves this "
+                           "machine only, 0.0.0.0 every network it is on)") from error
+    with socket.socket(family) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as error:
+            taken = error.errno == errno.EADDRINUSE
+            raise GranLabError(f"--port {port} is in use by another program: give another port, or --port 0 for "
+                               "any free one" if taken else f"--host {host!r} cannot be served: {error.strerror} "
+                               "(127.0.0.1 serves this machine only, 0.0.0.0 every network it is on)") from error
+
+
 class ClosedTabFilter(logging.Filter):
     """Drops the warnings and tracebacks of a message sent to a tab that just closed: a closed
     tab is normal in a classroom, and the terminal the lab runs in should stay readable."""
@@ -146,6 +169,8 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
           **changes) -> None:
     """Start the lab and serve until interrupted (prints the URL). ``changes``: settings of the
     first preset (e.g. ``particles=5600``)."""
+    check_address(host, port)
+    check_output(data_dir, "--data-dir", folder=True)
     if host not in LOCAL_HOSTS:
         print(f"warning: serving on {host}: the lab has no authentication; anyone who can reach this address "
               "can control the simulation and write files in its data folder", file=sys.stderr)

@@ -24,6 +24,7 @@ import json
 import math
 import sys
 import time
+from importlib.metadata import version
 from pathlib import Path
 
 import numba
@@ -72,7 +73,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     else:
         scene = load_scene(name)
         if scene.threads:
-            numba.set_num_threads(min(scene.threads, numba.config.NUMBA_NUM_THREADS))
+            numba.set_num_threads(scene.threads)
         sim = scene.build()
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
@@ -264,7 +265,12 @@ def _study(args) -> dict:
                          friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
                          gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
     progress = None if args.json else text_progress
-    return run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress, force=args.force)
+    result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress, force=args.force)
+    if result["failed"] and not any(model["completed"] for model in result["models"].values()):
+        first = result["failed"][0]
+        raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "
+                           f"{first['seed']} ({first['model']}): {first['error']}")
+    return result
 
 
 def _print_study(result: dict) -> None:
@@ -373,8 +379,17 @@ def _positive_int(text: str) -> int:
     return value
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, as every other error of the command: the
+    usage block argparse prints first would bury the line that says what is wrong."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="granlab", description="GranLab: 2D granular mechanics lab")
+    parser = OneLineParser(prog="granlab", description="GranLab: 2D granular mechanics lab")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version('granlab')}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     run = commands.add_parser("run", help="run a TOML scene (a path or a built-in name)")
@@ -447,7 +462,8 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--dt-factor", type=_float, default=0.2, help="dt = f sqrt(m_min / K_n) (default 0.2)")
     ratchet.add_argument("--amplitude", type=_float, default=0.2, help="Delta sigma in units of P0 (default 0.2)")
     ratchet.add_argument("--period", type=_float, default=10.0, help="cycle period in tau (default 10)")
-    ratchet.add_argument("--reference-cycle", type=int, default=30, help="cycle defining L0 (default 30)")
+    ratchet.add_argument("--reference-cycle", type=int,
+                         help="cycle defining L0 (default 30 %% of --cycles, at most cycles - 3: 30 of 100)")
     ratchet.add_argument("--gravity", type=_float, default=0.0, help="weak gravity (Sec. IV B 3)")
     ratchet.add_argument("--seed", type=int, default=0, help="first seed")
     ratchet.add_argument("--watch", type=int, default=0, metavar="K",

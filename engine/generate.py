@@ -15,6 +15,9 @@ from .kernels.packing import random_sequential_addition
 from .params import positive
 
 RADIUS_DISTRIBUTIONS = ("constant", "uniform")
+MAX_DISKS = 4_000_000
+"""Larger systems are refused before any array is made: a disk costs about 600 bytes of state,
+contact and neighbour tables (10⁷ disks took 5–7 GB), and a 10⁶ × 10⁶ lattice would ask for TiB."""
 
 
 def radii(count: int, radius: float | None = None, radius_min: float | None = None,
@@ -24,8 +27,8 @@ def radii(count: int, radius: float | None = None, radius_min: float | None = No
     Gilabert Sec. II A (diameters uniform in [a/2, a]): ``uniform`` with
     ``radius_min = a/4, radius_max = a/2``; ratcheting Sec. IV B 1: ``radius_max [0.7, 1]``.
     """
-    if not isinstance(count, (int, np.integer)) or count < 1:
-        raise ParameterError("count", count, "a whole number >= 1")
+    if not isinstance(count, (int, np.integer)) or not 1 <= count <= MAX_DISKS:
+        raise ParameterError("count", count, f"a whole number from 1 to {MAX_DISKS}")
     if distribution == "constant":
         if radius is None:
             raise ParameterError("radius", radius, "a positive radius for the constant distribution")
@@ -62,6 +65,8 @@ def _counts(rows, columns):
     for name, value in (("rows", rows), ("columns", columns)):
         if not isinstance(value, (int, np.integer)) or value < 1:
             raise ParameterError(name, value, "a whole number >= 1")
+    if rows * columns > MAX_DISKS:
+        raise ParameterError("rows × columns", rows * columns, f"at most {MAX_DISKS} disks")
 
 
 def random_gas(radius: np.ndarray, region, periodic=(False, False), seed: int = 0,

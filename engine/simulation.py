@@ -303,8 +303,8 @@ class Simulation:
         if ratio[k] <= allowed:
             return
         other = f"disk {j[k]}" if j[k] < n else f"wall {self.walls.names[j[k] - n]!r}"
-        raise ParameterError(f"initial overlap of disk {i[k]} and {other}", round(float(ratio[k]), 6),
-                             f"at most {allowed} of the smaller radius (Integration.initial_overlap)")
+        raise ParameterError(f"initial overlap of disk {i[k]} and {other} / smaller radius", round(float(ratio[k]), 6),
+                             f"at most {allowed} (Integration.initial_overlap)")
 
     # ------------------------------------------------------------------ running
     @property

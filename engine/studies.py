@@ -23,9 +23,10 @@ from .analysis.ratchet import deviatoric_strain, ratchet_verdict
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output
-from .params import TANGENTIAL_MODELS, nonnegative, positive
+from .params import TANGENTIAL_MODELS, finite, nonnegative, positive
 from .protocols.cyclic import CyclicLoad, run_cycles
-from .protocols.prepare import compress
+from .protocols.prepare import biaxial_law, compress
+from .simulation import stability_bound
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,7 @@ class RatchetStudy:
     phase: float | None = None
     friction: float = 0.2
     dt_factor: float = 0.2
-    reference_cycle: int = 30
+    reference_cycle: int | None = None
     gravity: float = 0.0
     first_seed: int = 0
     normal_model: str = "linear"
@@ -63,14 +64,37 @@ class RatchetStudy:
         for model in self.models:
             if model not in TANGENTIAL_MODELS:
                 raise ParameterError("model", model, "one of " + ", ".join(TANGENTIAL_MODELS) + " or all")
+        if self.cycles < 3:
+            raise ParameterError("cycles", self.cycles, "at least 3 (the strain per cycle is fitted over 3 cycles "
+                                                        "at least)")
+        if self.reference_cycle is None:
+            object.__setattr__(self, "reference_cycle", default_reference_cycle(self.cycles))
         if not 0 <= self.reference_cycle <= self.cycles - 3:
             raise ParameterError("reference_cycle", self.reference_cycle,
                                  f"a cycle from 0 to cycles - 3 = {self.cycles - 3} (3 cycles at least are fitted)")
-        positive("dt_factor", self.dt_factor)
+        if self.phase is not None:
+            finite("phase", self.phase)
+        largest = max_dt_factor(self.normal_model)
+        if not 0 < positive("dt_factor", self.dt_factor) <= largest:
+            raise ParameterError("dt_factor", self.dt_factor,
+                                 f"at most {largest:.4g}: above, dt exceeds the stability bound of these disks")
         nonnegative("friction", self.friction, allow_inf=True)
         positive("amplitude", self.amplitude)
         positive("period", self.period)
         nonnegative("gravity", self.gravity)
+
+
+def default_reference_cycle(cycles: int) -> int:
+    """The paper's choice scaled to the study: L0 at cycle 30 of 100 (ratcheting Sec. IV B 2), so
+    that the first 30 % of the cycles, where the packing settles, stay out of the fit."""
+    return min(round(0.3 * cycles), cycles - 3)
+
+
+def max_dt_factor(normal_model: str = "linear") -> float:
+    """The largest ``dt_factor`` the biaxial box's law allows: its stability bound in units of
+    ``sqrt(m_min / K_n)``, which for uniform discs does not depend on their sizes."""
+    law = biaxial_law(normal_model=normal_model)
+    return stability_bound(law, np.ones(1), np.ones(1), np.full(1, 0.5)) * math.sqrt(law.normal_stiffness)
 
 
 def sample_file(out_dir: str, model: str, seed: int) -> Path:

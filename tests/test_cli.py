@@ -140,3 +140,27 @@ def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, cap
                          "(disk 1 of 2): the run had diverged when it was written; analyse an earlier frame "
                          "(--frame)\n"), analysis
     assert cli.main(["analyze", str(out), "packing", "--frame", "0"]) == 0
+
+
+def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(tmp_path):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        refusals = {
+            ("--port", "-1"): "--port -1 is not allowed: a port from 1 to 65535, or 0 for any free port",
+            ("--port", "99999"): "--port 99999 is not allowed",
+            ("--port", str(port)): f"--port {port} is in use by another program",
+            ("--host", "nosuch.invalid"): "--host 'nosuch.invalid' is not an address of this machine",
+            ("--port", "0", "--data-dir", __file__): f"--data-dir {__file__!r} is a file, not a folder",
+        }
+        for args, message in refusals.items():
+            process = subprocess.run([sys.executable, "-m", "app.cli", "serve", *args], capture_output=True,
+                                     text=True, timeout=120)
+            assert process.returncode == 2 and process.stderr.count("\n") == 1, (args, process.stderr)
+            assert process.stderr.startswith(f"granlab serve: error: {message}"), (args, process.stderr)
+    folder = granlab("run", str(tmp_path), check=False)
+    assert folder.returncode == 2 and f"{str(tmp_path)!r} is a folder: give a scene file" in folder.stderr
+    assert granlab("--version").stdout.startswith("granlab ")

@@ -53,8 +53,7 @@ def test_overlapping_initial_disks_beyond_tolerance_are_refused():
     particles = ParticleState([[0, 0], [1.7, 0]], [1.0, 1.0])
     with pytest.raises(ParameterError) as error:
         Simulation(particles, ContactLaw())
-    assert "initial overlap of disk 0 and disk 1 = 0.3" in str(error.value)
-    assert "at most 0.1 of the smaller radius" in str(error.value)
+    assert "initial overlap of disk 0 and disk 1 / smaller radius = 0.3 is not allowed: at most 0.1" in str(error.value)
     Simulation(ParticleState([[0, 0], [1.95, 0]], [1.0, 1.0]), ContactLaw())
 
 
@@ -147,6 +146,13 @@ def test_scene_errors_name_the_key_and_what_is_allowed():
         "[simulation]\nsteps = 1\n": "[particles] is missing",
         base + "friction = = 1\n": "not valid TOML",
         base + "[cell]\nlengths = [10, 10]\ncontrol = ['stress', 'squeeze']\n": "cell.control[1] = 'squeeze'",
+        base.replace("x = 0", "x = nan"): "particles.disk[0].x = nan is not allowed: a number",
+        base + "[[particles.lattice]]\nrows = 2\ncolumns = 2\nspacing = 3\nradius = 1\nvelocity_spread = nan\n":
+            "particles.lattice[0].velocity_spread = nan is not allowed: a number",
+        base + "[[particles.lattice]]\nrows = 1000000\ncolumns = 1000000\nspacing = 3\nradius = 1\n":
+            "rows × columns = 1000000000000 is not allowed: at most 4000000 disks",
+        base.replace("steps = 10", "steps = 10\nthreads = 1000"): "simulation.threads = 1000 is not allowed: at most",
+        "title = 5\n" + base: "scene.title = 5 is not allowed: a string",
     }
     for text, expected in cases.items():
         with pytest.raises(SceneError) as error:

@@ -34,9 +34,9 @@ def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):
 
 
 def test_a_failing_sample_is_reported_and_does_not_stop_the_others():
-    bad = RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, dt_factor=50.0)
+    bad = RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, gravity=1e3)
     results = ratchet_sample(bad, 3, None)
-    assert results[0]["error"].startswith("ParameterError: dt = ")
+    assert results[0]["error"].startswith("DivergenceError: run diverged")
     good = ratchet_sample(RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, period=1.0), 4, None)
     summary = summarize(RatchetStudy(particles=4, samples=2, cycles=5, reference_cycle=0), results + good)
     data = summary["models"]["cundall-strack"]
@@ -48,15 +48,32 @@ def test_a_failing_sample_is_reported_and_does_not_stop_the_others():
 def test_bad_study_input_is_refused_clearly():
     with pytest.raises(ParameterError, match="model = 'hooke'"):
         RatchetStudy(models=("hooke",))
-    with pytest.raises(ParameterError, match="reference_cycle = 30 is not allowed"):
-        RatchetStudy(cycles=10)
-    process = granlab("study", "ratchet", "--cycles", "0")
-    assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
+    with pytest.raises(ParameterError, match="reference_cycle = 30 is not allowed: a cycle from 0 to cycles - 3 = 7"):
+        RatchetStudy(cycles=10, reference_cycle=30)
+    assert [RatchetStudy(cycles=c).reference_cycle for c in (3, 4, 10, 100, 200)] == [0, 1, 3, 30, 60]
+    with pytest.raises(ParameterError, match="cycles = 2 is not allowed: at least 3"):
+        RatchetStudy(cycles=2)
+    with pytest.raises(ParameterError, match=r"dt_factor = 0.25 is not allowed: at most 0.248"):
+        RatchetStudy(dt_factor=0.25)
+    refusals = {("--cycles", "0"): "0 is not allowed: a whole number > 0",
+                ("--phase", "nan"): "phase = nan is not allowed", ("--phase", "inf"): "phase = inf is not allowed",
+                ("--dt-factor", "5"): "dt_factor = 5.0 is not allowed: at most 0.248"}
+    for args, message in refusals.items():
+        process = granlab("study", "ratchet", *args)
+        assert process.returncode == 2 and message in process.stderr and process.stderr.count("\n") == 1, args
     process = granlab("study", "ratchet", "--model", "hooke")
     assert process.returncode == 2 and "invalid choice: 'hooke'" in process.stderr
     process = granlab("study", "ratchet", "--samples", "1", "--cycles", "5", "--reference-cycle", "0",
                       "--scheduler", "tcp://127.0.0.1:9")
     assert process.returncode == 2 and "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in process.stderr
+
+
+def test_a_study_whose_samples_all_fail_exits_with_an_error():
+    process = granlab("study", "ratchet", "--particles", "4", "--samples", "2", "--cycles", "3", "--period", "1",
+                      "--gravity", "1000")
+    assert process.returncode == 2
+    assert process.stderr.splitlines()[-1].startswith("granlab study: error: every sample failed (2 of 2); seed 0 (cundall-strack): "
+                                     "DivergenceError: run diverged"), process.stderr
 
 
 def test_watched_contacts_trace_paths_inside_the_coulomb_cone(tmp_path):

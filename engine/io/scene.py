@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from .. import generate
@@ -83,9 +84,16 @@ def load_scene(path_or_name: str | Path) -> Scene:
     if not path.suffix and str(path_or_name) in builtin_scenes():
         text = (resources.files("engine.io") / "scenes" / f"{path_or_name}.toml").read_text()
         return parse_scene(text, origin=f"built-in scene {path_or_name!r}")
+    if path.is_dir():
+        raise SceneError(f"{str(path)!r} is a folder: give a scene file (.toml) or a built-in scene "
+                         f"({', '.join(builtin_scenes())})")
     if not path.is_file():
         raise SceneError(f"scene file {str(path)!r} does not exist (built-in scenes: {', '.join(builtin_scenes())})")
-    return parse_scene(path.read_text(), origin=str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise SceneError(f"scene file {str(path)!r} cannot be read as UTF-8 text: {error}") from error
+    return parse_scene(text, origin=str(path))
 
 
 def parse_scene(text: str, origin: str = "scene") -> Scene:
@@ -114,7 +122,7 @@ def _number(table, key, path, default=None):
     value = table.get(key, default)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
         raise SceneError(f"{path}.{key} = {value!r} is not allowed: a number")
     return float(value)
 
@@ -134,7 +142,7 @@ def _vector(table, key, path, size=2, default=None):
     if value is None:
         return None
     if not isinstance(value, list) or len(value) != size or \
-            any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+            any(isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) for v in value):
         raise SceneError(f"{path}.{key} = {value!r} is not allowed: a list of {size} numbers")
     return tuple(float(v) for v in value)
 
@@ -179,8 +187,16 @@ def _scene(data: dict, text: str) -> Scene:
     particles = _particles(data.get("particles"), cell, data.get("box"))
     return Scene(particles=particles, law=law, integration=integration, walls=walls, cell=cell, gravity=gravity,
                  duration=duration, steps=steps, record_every=_integer(sim, "record_every", "simulation", 0, 0),
-                 threads=_integer(sim, "threads", "simulation", minimum=1), title=str(data.get("title", "")),
+                 threads=_threads(sim), title=_string(data, "title", "scene", ""),
                  source=text)
+
+
+def _threads(sim) -> int | None:
+    threads = _integer(sim, "threads", "simulation", minimum=1)
+    if threads is not None and threads > numba.config.NUMBA_NUM_THREADS:
+        raise SceneError(f"simulation.threads = {threads} is not allowed: at most {numba.config.NUMBA_NUM_THREADS}, "
+                         "the threads numba may use on this machine (leave threads out to use them all)")
+    return threads
 
 
 def _load(table, path) -> Load:
@@ -358,7 +374,7 @@ def _add_group(add, group, path, positions, default_density, radius=None):
     mass = density * math.pi * radius ** 2
     velocity = np.tile(_vector(group, "velocity", path, default=[0.0, 0.0]), (n, 1))
     spread = _number(group, "velocity_spread", path, 0.0)
-    if spread < 0:
+    if not spread >= 0:
         raise SceneError(f"{path}.velocity_spread = {spread!r} is not allowed: a standard deviation >= 0")
     if spread > 0:
         velocity += np.random.default_rng(_integer(group, "seed", path, 0) + 1).normal(0.0, spread, (n, 2))

@@ -43,6 +43,13 @@ class Prepared:
 
 
 # ---------------------------------------------------------------------------------------------- biaxial box
+def biaxial_law(stiffness: float = 100.0, damping_ratio: float = 0.3, normal_model: str = "linear",
+                tangential_model: str = "cundall-strack") -> ContactLaw:
+    """The contact law of the biaxial box: ``K_n = K_t = stiffness``, frictionless."""
+    return ContactLaw(normal_stiffness=stiffness, tangential_stiffness=stiffness, friction=0.0,
+                      damping_ratio=damping_ratio, normal_model=normal_model, tangential_model=tangential_model)
+
+
 def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness: float = 100.0,
                 box: float = 1.0, density: float = 1.0, damping_ratio: float = 0.3, normal_model: str = "linear",
                 tangential_model: str = "cundall-strack", wall_mass: float | None = None, dt: float | None = None,
@@ -65,8 +72,7 @@ def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness
     r = r_max * np.random.default_rng(seed).uniform(0.7, 1.0, count)
     positions = square_lattice(side, side, box / side, origin=(r_max, r_max))[:count]
     particles = ParticleState(positions, r, density=density)
-    law = ContactLaw(normal_stiffness=stiffness * pressure, tangential_stiffness=stiffness * pressure, friction=0.0,
-                     damping_ratio=damping_ratio, normal_model=normal_model, tangential_model=tangential_model)
+    law = biaxial_law(stiffness * pressure, damping_ratio, normal_model, tangential_model)
     mass = wall_mass_fraction * float(particles.mass.sum()) if wall_mass is None else wall_mass
     walls = box_walls(0.0, box, 0.0, box, loads={"right": Load(base=pressure), "top": Load(base=pressure)},
                       wall_mass=mass)
