@@ -224,6 +224,8 @@ class Simulation:
         self.wall_params = tuple(walls)
         self._check_geometry(walls, cell)
         self.walls = WallState(tuple(walls))
+        if check_initial_overlap:
+            self._check_disks_inside_walls()
         self.cell = CellState(cell, float(particles.mass.sum()))
         self.gravity = np.array([finite("gravity[0]", gravity[0]), finite("gravity[1]", gravity[1])])
         self.step = 0
@@ -287,6 +289,20 @@ class Simulation:
                                            "(see engine.simulation.stability_bound)")
         return float(dt)
 
+    def _check_disks_inside_walls(self):
+        """The walls' part of :meth:`_check_initial_overlap`, before any table is made: a large
+        system placed outside its box is refused in a moment, not after its set-up."""
+        radius = self.particles.radius
+        for w in range(self.walls.count):
+            ratio = (self.walls.offset[w] + radius - self.particles.position @ self.walls.normal[w]) / radius
+            k = int(np.argmax(ratio))
+            if ratio[k] > self.integration.initial_overlap:
+                raise self._overlap_error(k, f"wall {self.walls.names[w]!r}", ratio[k])
+
+    def _overlap_error(self, i: int, other: str, ratio: float) -> ParameterError:
+        return ParameterError(f"initial overlap of disk {i} and {other} / smaller radius", round(float(ratio), 6),
+                              f"at most {self.integration.initial_overlap} (Integration.initial_overlap)")
+
     def _check_initial_overlap(self):
         table = self.contacts
         n = self.particles.count
@@ -299,12 +315,10 @@ class Simulation:
         smaller = np.where(j < n, np.minimum(radius[i], radius[np.minimum(j, n - 1)]), radius[i])
         ratio = -table.surface_gap[rows] / smaller
         k = int(np.argmax(ratio))
-        allowed = self.integration.initial_overlap
-        if ratio[k] <= allowed:
+        if ratio[k] <= self.integration.initial_overlap:
             return
         other = f"disk {j[k]}" if j[k] < n else f"wall {self.walls.names[j[k] - n]!r}"
-        raise ParameterError(f"initial overlap of disk {i[k]} and {other} / smaller radius", round(float(ratio[k]), 6),
-                             f"at most {allowed} (Integration.initial_overlap)")
+        raise self._overlap_error(i[k], other, ratio[k])
 
     # ------------------------------------------------------------------ running
     @property
