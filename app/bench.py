@@ -127,7 +127,7 @@ def run(particles: int = 5600, seconds: float = 20.0, tabs: int = 100) -> dict:
     reference = engine_bench.measure(1)["particle_steps_per_s"]
     result = {"particles": particles, "bench_1_thread": reference}
     with tempfile.TemporaryDirectory() as data, sync_playwright() as playwright:
-        process, url = spawn(data, "--particles", str(particles))
+        process, url, _ = spawn(data, "--particles", str(particles))
         try:
             browser = playwright.chromium.launch(executable_path=chromium, args=["--no-sandbox", "--disable-gpu"])
             page = browser.new_page()

@@ -15,7 +15,10 @@ def build_parser():
     commands = next(action for action in parser._actions if action.dest == "command")
     serve = commands.add_parser("serve", help="start the browser lab (engine thread, 3D scene, dashboard)")
     serve.add_argument("--port", type=int, default=5006, help="dashboard port (default 5006; 0: any free port)")
-    serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    serve.add_argument("--host", default="127.0.0.1",
+                       help="address to bind (default 127.0.0.1: this machine only; any other serves with tokens)")
+    serve.add_argument("--tokens", action="store_true",
+                       help="a presenter's and a viewers' address, each with its own token, on this machine too")
     serve.add_argument("--data-dir", default="granlab-data", help="folder for saved runs (default ./granlab-data)")
     serve.add_argument("--preset", default="ratchet", help="preset shown first (default ratchet)")
     serve.add_argument("--particles", type=int, help="number of disks of the first preset (default: the preset's)")
@@ -65,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
             from .server import serve
 
             changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
-            serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, **changes)
+            serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
+                  **changes)
             return 0
         if args.command == "bench" and args.lab:
             from . import bench

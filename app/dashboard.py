@@ -66,10 +66,13 @@ def _note(level: str, text: str, one_line: bool = False) -> str:
 
 
 class Dashboard:
-    """The page of one tab. ``scene_url`` is the viser client's address."""
+    """The page of one tab. ``scene_url`` is the viser client's address. A ``viewer`` sees
+    everything live but changes nothing: its controls show the values in effect, disabled, its
+    Files group is hidden, and the server ignores any command from its page."""
 
-    def __init__(self, engine, scene, scene_url: str):
+    def __init__(self, engine, scene, scene_url: str, viewer: bool = False):
         self.engine = engine
+        self.viewer = viewer
         self.scene = scene
         self.cursors: dict[str, Cursor] = {}
         self.message_seq = engine.messages.latest_seq
@@ -161,9 +164,9 @@ class Dashboard:
                                     sizing_mode="stretch_width")
 
         self.preset.param.watch(lambda e: e.new in PRESETS and self._command("preset", name=e.new), "value")
-        self.play.on_click(lambda e: self.engine.submit("pause" if self.play.name == "Pause" else "play"))
-        self.step.on_click(lambda e: self.engine.submit("step"))
-        self.reset.on_click(lambda e: self.engine.submit("reset"))
+        self.play.on_click(lambda e: self._command("pause" if self.play.name == "Pause" else "play"))
+        self.step.on_click(lambda e: self._command("step"))
+        self.reset.on_click(lambda e: self._command("reset"))
         self.speed.param.watch(lambda e: self._control("speed", e.new), "value")
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
@@ -195,11 +198,13 @@ class Dashboard:
         self._command("apply", changes={key: value})
 
     def _command(self, command: str, **payload) -> None:
-        if self._syncing:
+        if self._syncing or self.viewer:
             return
         self.engine.submit(command, **payload)
 
     def _color(self, event) -> None:
+        if self.viewer:  # the scene is shared: its colours are the presenter's choice
+            return
         self.scene.color_field = event.new
         self._legend_key = None
 
@@ -210,7 +215,7 @@ class Dashboard:
             self._note("watch", "error", f"“{self.watch.value}” is not a contact: two disk numbers “i j” "
                                          "(a number from N on names a wall)")
             return
-        self.engine.submit("watch", pair=(i, j))
+        self._command("watch", pair=(i, j))
 
     def _note(self, key: str, level: str, text: str) -> None:
         key = key if key in self.notes else "run"
@@ -456,7 +461,7 @@ class Dashboard:
         used = set(cls.controls) if cls else set()
         for widget, key in self.settings_widgets:
             widget.visible = key in used or key == "frames_per_cycle"
-            widget.disabled = replay is not None
+            widget.disabled = replay is not None or self.viewer
             if not settings or key not in settings:
                 continue
             value = math.inf if settings[key] == "inf" else settings[key]  # JSON carries inf as "inf"
@@ -507,10 +512,17 @@ class Dashboard:
                           self._note_pane("save"), self.load_name, self.load, self._note_pane("load"),
                           self.record_name, self.record_seconds, self.record, self._note_pane("record"),
                           sizing_mode="stretch_width")
+        if self.viewer:
+            files.visible = False
+            for widget in (self.preset, self.play, self.step, self.reset, self.speed, self.apply_reset, self.color,
+                           self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
+                widget.disabled = True
         sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, width=250,
                             sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
-        header = pn.Row(pn.pane.HTML("<div style='font-size:22px;font-weight:bold;padding-top:8px'>GranLab</div>",
-                                     width=105),
+        title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
+                 "runs it</div>" if self.viewer else "GranLab")
+        header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
+                                     width=105 + 95 * self.viewer),
                         self.preset, self.play, self.step, self.reset, self.speed,
                         pn.Column(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"),
                                   sizing_mode="stretch_width", margin=(6, 0, 0, 0)),

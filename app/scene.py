@@ -27,6 +27,7 @@ the plane of the disks' top faces.
 
 from __future__ import annotations
 
+import http
 import threading
 from collections import deque
 from time import monotonic
@@ -34,6 +35,8 @@ from typing import Callable
 
 import numpy as np
 import viser
+import websockets.asyncio.server
+from websockets.http11 import Request
 
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR,
                       PALETTES, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, SceneFrame, cell_outline, color_index,
@@ -147,6 +150,33 @@ def _segments_3d(segments: np.ndarray, z: float) -> np.ndarray:
     return points
 
 
+_SERVE_PATCH = threading.Lock()
+
+
+def _guarded_server(host: str, port: int, admit: Callable[[Request], str | None]) -> viser.ViserServer:
+    """A viser server whose websocket handshakes pass ``admit`` first (None: admitted; a text: the
+    reason of a 403). viser 1.1.1 accepts any Origin and has no hook on the handshake, but it
+    starts its server with ``websockets.asyncio.server.serve`` from inside its constructor, which
+    returns once the server listens: that function is wrapped for the constructor's duration."""
+    original = websockets.asyncio.server.serve
+
+    def serve(*args, process_request=None, **kwargs):
+        def guard(connection, request: Request):
+            if request.headers.get("Upgrade", "").lower() == "websocket":
+                refusal = admit(request)
+                if refusal is not None:
+                    return connection.respond(http.HTTPStatus.FORBIDDEN, refusal + "\n")
+            return process_request(connection, request) if process_request else None
+        return original(*args, process_request=guard, **kwargs)
+
+    with _SERVE_PATCH:
+        websockets.asyncio.server.serve = serve
+        try:
+            return viser.ViserServer(host=host, port=port, verbose=False)
+        finally:
+            websockets.asyncio.server.serve = original
+
+
 class SceneView:
     """The lab's viser scene: one ViserServer per process, drawing SceneFrames.
 
@@ -154,8 +184,11 @@ class SceneView:
     `on_pick`, `fps` and the properties from any thread.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0):
-        self._server = viser.ViserServer(host=host, port=port, verbose=False)
+    def __init__(self, host: str = "127.0.0.1", port: int = 0,
+                 admit: Callable[[Request], str | None] | None = None,
+                 may_pick: Callable[[str], bool] | None = None):
+        self._server = _guarded_server(host, port, admit) if admit else viser.ViserServer(host=host, port=port,
+                                                                                          verbose=False)
         self._server.gui.configure_theme(show_logo=False, show_share_button=False)
         self._server.gui.main_panel.minimize()
         self._server.scene.configure_default_lights(enabled=True, cast_shadow=False)
@@ -163,6 +196,7 @@ class SceneView:
         self._lock = threading.Lock()
         self._color_field = "rotation"
         self._pick_callbacks: list[Callable[[int], None]] = []
+        self._may_pick = may_pick
         self._draw_times: deque[float] = deque()
         self._created = monotonic()
         self.frames_pushed = 0
@@ -242,6 +276,12 @@ class SceneView:
                 self._fill_colors(self._frame)
                 with self._server.atomic():
                     self._disks.batched_colors = self._colors
+
+    def _client_path(self, client_id: int) -> str:
+        """The path of the websocket a client connected with ("" once it has gone): viser keeps
+        the connections of its live clients by id, and tells nothing else of how one came."""
+        connection = self._server._websock_server._live_connections.get(client_id)
+        return connection.request.path if connection is not None and connection.request is not None else ""
 
     def on_pick(self, callback: Callable[[int], None]) -> None:
         """Call callback(disk_index) when a browser click lands on a disk
@@ -460,7 +500,7 @@ class SceneView:
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         frame = self._frame
-        if frame is None:
+        if frame is None or (self._may_pick is not None and not self._may_pick(self._client_path(event.client_id))):
             return
         hit = pick_disk(event.ray_origin, event.ray_direction, frame.positions, frame.radii,
                         plane_z=self._disk_top)

@@ -1,9 +1,16 @@
 """``granlab serve``: the engine thread, the viser scene and the panel server, together.
 
-Binds 127.0.0.1 unless told otherwise (the lab has no authentication). Routes: ``/`` the
-dashboard (one per tab), ``/status`` and ``/scene`` JSON for tests and monitoring. The viser
-client is served by viser on its own port and embedded in the dashboard; only the dashboard's
-address is printed.
+Binds 127.0.0.1 unless told otherwise. Routes: ``/`` the dashboard (one per tab), ``/status``
+and ``/scene`` JSON for tests and monitoring. The viser client is served by viser on its own
+port and embedded in the dashboard; only the dashboard's address is printed. The scene's
+websocket admits only the scene page's own origin (any web page could otherwise connect to it).
+
+Served on a network (or with ``tokens``), the lab prints two addresses, each with its own random
+token: the presenter's, which controls the simulation and its files, and the viewers', which see
+everything live and change nothing. Without a valid token neither the dashboard, its websocket,
+the scene's websocket, ``/status`` nor ``/scene`` answers. The page's first request sets a cookie
+(HttpOnly, SameSite=Strict) that its websocket and later requests carry; the role of a tab is the
+token of the address it was opened with.
 """
 
 from __future__ import annotations
@@ -14,11 +21,13 @@ import io
 import json
 import logging
 import re
+import secrets
 import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -26,7 +35,9 @@ import panel as pn
 import tornado.web
 import tornado.websocket
 from tornado.iostream import StreamClosedError
+from bokeh.server.auth_provider import AuthProvider
 from bokeh.settings import settings as bokeh_settings
+from websockets.http11 import Request
 
 from engine.errors import GranLabError
 from engine.io.jsonsafe import jsonable
@@ -37,13 +48,62 @@ from .engine_thread import LabEngine
 from .scene import SceneView
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+COOKIE = "granlab-token"
+LOCKED_PAGE = ("<!doctype html><title>GranLab</title><body style='font:20px sans-serif;margin:3em'>"
+               "<h1>GranLab</h1><p>This lab is served with tokens: open the full address the presenter gave, "
+               "with its <code>?token=…</code>.</p>")
+
+
+def request_role(handler: tornado.web.RequestHandler, roles: dict[str, str]) -> str | None:
+    """The role of a request: that of the token in its query (which then goes in the cookie) or in
+    its cookie; None without a valid one."""
+    token = handler.get_query_argument("token", None)
+    if token in roles:
+        if not isinstance(handler, tornado.websocket.WebSocketHandler):
+            handler.set_cookie(COOKIE, token, httponly=True, samesite="Strict")
+        return roles[token]
+    return roles.get(handler.get_cookie(COOKIE))
+
+
+class LockedHandler(tornado.web.RequestHandler):
+    """Where bokeh sends a request without a valid token: a 403 that says what to open."""
+
+    def get(self):
+        self.set_status(403)
+        self.write(LOCKED_PAGE)
+
+
+class TokenAuth(AuthProvider):
+    """Bokeh's check of the dashboard's page, websocket and files: a request needs a valid token."""
+
+    def __init__(self, roles: dict[str, str]):
+        self.roles = roles
+        super().__init__()
+
+    @property
+    def get_user(self):
+        return lambda handler: request_role(handler, self.roles)
+
+    @property
+    def login_url(self) -> str:
+        return "/locked"
+
+    @property
+    def login_handler(self):
+        return LockedHandler
 
 
 class JSONHandler(tornado.web.RequestHandler):
-    """``GET``: the dictionary ``read()`` returns, as JSON (the lab's status, the scene's state)."""
+    """``GET``: the dictionary ``read()`` returns, as JSON (the lab's status, the scene's state);
+    with ``roles``, only to a request with a valid token."""
 
-    def initialize(self, read):
+    def initialize(self, read, roles):
         self.read = read
+        self.roles = roles
+
+    def prepare(self):
+        if self.roles and request_role(self, self.roles) is None:
+            raise tornado.web.HTTPError(403, "a valid token is needed")
 
     def get(self):
         self.set_header("Content-Type", "application/json")
@@ -55,11 +115,13 @@ class Lab:
     """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
-                 preset: str = "ratchet", scene_rate: float = 30.0, **changes):
+                 preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False, **changes):
         self.host = host
+        self.roles = {secrets.token_urlsafe(16): role for role in ("presenter", "viewer")} if tokens else {}
         self.engine = LabEngine(data_dir, preset, wait_for_tab=True, **changes)
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own address: the page embeds it
-            self.scene = SceneView(host=host, port=0)
+            self.scene = SceneView(host=host, port=0, admit=self._admit_scene,
+                                   may_pick=self._presenter_path if tokens else None)
         self.scene.on_pick(lambda index: self.engine.submit("watch_disk", index=index))
         self.engine.scene_fps = self.scene.fps
         self.scene_interval = 1.0 / scene_rate
@@ -69,12 +131,17 @@ class Lab:
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
         # environment holds (cdn would point every stylesheet at cdn.holoviz.org)
         bokeh_settings.resources.set_value("server")
-        origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
+        # with tokens the page may be opened by any address of this machine; the SameSite cookie keeps
+        # other sites' pages from using a presenter's token
+        origins = ["*"] if self.roles else sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
+        auth = {"auth_provider": TokenAuth(self.roles)} if self.roles else {}
         self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
                                show=False, start=False, title="GranLab", threaded=False, verbose=False,
-                               extra_patterns=[(r"/status", JSONHandler, {"read": self.status}),
-                                               (r"/scene", JSONHandler, {"read": self.scene.state})],
-                               check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000)
+                               extra_patterns=[(r"/status", JSONHandler, {"read": self.status, "roles": self.roles}),
+                                               (r"/scene", JSONHandler, {"read": self.scene.state,
+                                                                         "roles": self.roles})],
+                               check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
+                               **auth)
 
     def status(self) -> dict:
         status = self.engine.status()
@@ -87,7 +154,42 @@ class Lab:
         self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)
         host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
-        return Dashboard(self.engine, self.scene, f"http://{host}:{self.scene.port}/").view()
+        scene_url = f"http://{host}:{self.scene.port}/"
+        token = self._session_token()
+        if token:  # viser's client drops the page's query; its websocket address may carry a path
+            scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
+        return Dashboard(self.engine, self.scene, scene_url, viewer=self.roles.get(token) == "viewer").view()
+
+    def _session_token(self) -> str:
+        """The valid token of the page being opened: in its address, else in its cookie."""
+        if not self.roles:
+            return ""
+        given = pn.state.session_args.get("token", [b""])[0].decode(errors="replace")
+        if given in self.roles:
+            return given
+        cookie = (pn.state.cookies or {}).get(COOKIE, "")
+        return cookie if cookie in self.roles else ""
+
+    def _presenter_path(self, path: str) -> bool:
+        """Whether a scene client connected with the presenter's token (only its clicks watch a disk)."""
+        return self.roles.get(path.lstrip("/")) == "presenter"
+
+    def _admit_scene(self, request: Request) -> str | None:
+        """None if the scene's websocket may open, else why not. Without tokens: a browser page
+        from this machine's names for the scene's own port only (or a client that is not a browser:
+        it sends no Origin, and it runs on this machine). With tokens: the page's own origin and a
+        valid token in the path."""
+        origin = request.headers.get("Origin")
+        if self.roles:
+            if origin is not None and urllib.parse.urlsplit(origin).netloc != request.headers.get("Host"):
+                return f"origin {origin} is not the scene's page"
+            return None if request.path.lstrip("/") in self.roles else "a valid token is needed"
+        if origin is None:
+            return None
+        parts = urllib.parse.urlsplit(origin)
+        if parts.hostname in LOCAL_HOSTS + (self.host,) and parts.port == self.scene.port:
+            return None
+        return f"origin {origin} is not the lab's scene page"
 
     def _closed(self, session_context) -> None:
         self.engine.tabs = max(0, self.engine.tabs - 1)
@@ -103,7 +205,16 @@ class Lab:
 
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}/"
+        """The presenter's address (the only one without tokens)."""
+        return self._address("presenter")
+
+    @property
+    def viewer_url(self) -> str | None:
+        return self._address("viewer") if self.roles else None
+
+    def _address(self, role: str) -> str:
+        token = next((token for token, given in self.roles.items() if given == role), None)
+        return f"http://{self.host}:{self.port}/" + (f"?token={token}" if token else "")
 
     def start(self) -> None:
         self.engine.start()
@@ -166,40 +277,58 @@ class ClosedTabFilter(logging.Filter):
 
 
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
-          **changes) -> None:
-    """Start the lab and serve until interrupted (prints the URL). ``changes``: settings of the
-    first preset (e.g. ``particles=5600``)."""
+          tokens: bool = False, **changes) -> None:
+    """Start the lab and serve until interrupted (prints the URL, or with tokens the presenter's and
+    the viewers' URLs; any host but this machine's loopback serves with tokens). ``changes``:
+    settings of the first preset (e.g. ``particles=5600``)."""
     check_address(host, port)
     check_output(data_dir, "--data-dir", folder=True)
-    if host not in LOCAL_HOSTS:
-        print(f"warning: serving on {host}: the lab has no authentication; anyone who can reach this address "
-              "can control the simulation and write files in its data folder", file=sys.stderr)
+    tokens = tokens or host not in LOCAL_HOSTS
     for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
         logging.getLogger(name).addFilter(ClosedTabFilter())
+    # with tokens any origin is meant (the token and the SameSite cookie guard the lab): bokeh's
+    # warning about it would only alarm the presenter
+    logging.getLogger("bokeh.server.util").addFilter(lambda record: "wildcard" not in record.getMessage())
     print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
-    lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, **changes)
-    print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)
+    lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, **changes)
+    if lab.viewer_url:
+        print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
+              "class)", flush=True)
+        print(f"GranLab lab at {lab.url} (the presenter's address: it controls the simulation and writes files "
+              "in the data folder; keep it to yourself)", flush=True)
+    else:
+        print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)
     lab.run_forever()
 
 
 def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
-    benchmarks and tests); returns the process and the URL it prints once serving."""
+    benchmarks and tests); returns the process, the URL it prints once serving and the viewers'
+    URL (None without tokens)."""
     process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", "0", "--data-dir", str(data_dir),
                                 *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.time() + timeout
+    viewer = None
     while time.time() < deadline:
         line = process.stdout.readline()
         if not line:
             break
-        found = re.search(r"GranLab lab at (http://\S+/)", line)
+        found = re.search(r"viewers' address: (http://\S+)", line)
+        viewer = found.group(1) if found else viewer
+        found = re.search(r"GranLab lab at (http://\S+)", line)
         if found:
-            return process, found.group(1)
+            return process, found.group(1), viewer
     process.kill()
     raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
 
 
+def endpoint(url: str, name: str) -> str:
+    """The address of route ``name`` of the lab at ``url`` (its token kept)."""
+    parts = urllib.parse.urlsplit(url)
+    return urllib.parse.urlunsplit(parts._replace(path="/" + name))
+
+
 def read_status(url: str) -> dict:
     """``GET /status`` of the lab at ``url``."""
-    with urllib.request.urlopen(url + "status", timeout=10) as response:
+    with urllib.request.urlopen(endpoint(url, "status"), timeout=10) as response:
         return json.loads(response.read())

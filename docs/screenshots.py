@@ -103,7 +103,7 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as data:
-        process, url = spawn(data)
+        process, url, _ = spawn(data)
         try:
             shoot(url, out, sizes, presets)
         finally:

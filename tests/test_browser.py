@@ -10,13 +10,14 @@ import json
 import os
 import shutil
 import time
+import urllib.error
 import urllib.request
-from urllib.parse import urlparse
+from urllib.parse import parse_qs, urlparse
 
 import pytest
 from playwright.sync_api import expect
 
-from app.server import read_status, spawn
+from app.server import endpoint, read_status, spawn
 from engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -41,7 +42,7 @@ def browser_context_args(browser_context_args):
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
     data = tmp_path_factory.mktemp("lab-data")
-    process, url = spawn(data)
+    process, url, _ = spawn(data)
     lab = {"url": url, "process": process, "data": data}
     yield lab
     process.terminate()
@@ -310,3 +311,100 @@ def test_analysis_tab_shows_the_force_network_and_only_the_figures_the_analysis_
     assert page.locator(".analysis-summary").inner_text().count("nan") == 0
     assert model(page, "figure-analysis-network", "m.visible") is True
     assert model(page, "figure-analysis-forces", "m.visible") is False
+
+
+def scene_socket(page) -> tuple[str, int]:
+    """The scene's websocket address as the tab's iframe gives it (viser's page port, and the
+    token's path with tokens), and the port of viser's page."""
+    src = urlparse(page.locator("iframe").get_attribute("src"))
+    given = parse_qs(src.query).get("websocket")
+    return (given[0] if given else f"ws://{src.netloc}/"), src.port
+
+
+def handshake(address: str, origin: str | None) -> int:
+    """The HTTP status the scene's websocket answers: 101 if it opens."""
+    import viser
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    try:
+        with connect(address, origin=origin, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=10):
+            return 101
+    except InvalidStatus as error:
+        return error.response.status_code
+
+
+def test_the_scene_websocket_admits_only_the_scene_page_origin(page, lab):
+    open_dashboard(page, lab)
+    address, port = scene_socket(page)
+    assert handshake(address, "http://evil.example") == 403
+    assert handshake(address, f"http://localhost:{port + 1 if port < 65535 else port - 1}") == 403
+    assert handshake(address, f"http://127.0.0.1:{port}") == 101
+
+
+@pytest.fixture(scope="module")
+def token_lab(tmp_path_factory):
+    data = tmp_path_factory.mktemp("token-lab-data")
+    process, url, viewer = spawn(data, "--tokens", "--preset", "ratchet16")
+    yield {"url": url, "viewer": viewer, "process": process, "data": data}
+    process.terminate()
+    process.wait(timeout=30)
+
+
+def http_status(url: str) -> int:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as response:
+            return response.status
+    except urllib.error.HTTPError as error:
+        return error.code
+
+
+def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
+    bare = token_lab["url"].split("?")[0]
+    assert token_lab["viewer"].split("?")[0] == bare and token_lab["viewer"] != token_lab["url"]
+    for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong"):
+        assert http_status(url) == 403, url
+    assert http_status(endpoint(token_lab["viewer"], "status")) == 200
+
+
+def lab_only(page, lab) -> None:
+    """Refuse the scene's page in this tab: its address is in the iframe, which is all the test
+    needs, and rendering it in software would slow every other action in the tab."""
+    bare = lab["url"].split("?")[0]
+    page.route("**/*", lambda route: route.continue_() if route.request.url.startswith(bare) else route.abort())
+
+
+def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, token_lab):
+    presenter = browser.new_page(viewport={"width": 1366, "height": 768})
+    lab_only(presenter, token_lab)
+    presenter.goto(token_lab["url"])
+    expect(presenter.locator(".play-button button")).to_be_enabled(timeout=60000)
+    expect(presenter.locator(".save-button button")).to_be_visible()
+    wait_status(token_lab, lambda s: s["state"] == "running")
+    viewer = browser.new_page(viewport={"width": 1366, "height": 768})
+    lab_only(viewer, token_lab)
+    viewer.goto(token_lab["viewer"])
+    expect(viewer.locator(".viewer-badge")).to_contain_text("viewer", timeout=60000)
+    wait_status(token_lab, lambda s: s["tabs"] >= 2)
+    for control in (".play-button button", ".reset-button button", ".preset-select select", ".color-select select",
+                    ".amplitude-input input", ".watch-button button"):
+        expect(viewer.locator(control)).to_be_disabled()
+    expect(viewer.locator(".save-button button")).to_be_hidden()
+    expect(viewer.locator(".load-button button")).to_be_hidden()
+    # a page that enables its own Pause button and presses it: the server ignores a viewer's commands
+    viewer.evaluate("() => { for (const m of Bokeh.documents[0].all_models)"
+                    " if ((m.css_classes || []).includes('play-button')) m.disabled = false; }")
+    viewer.locator(".play-button button").click()
+    viewer.wait_for_timeout(1500)
+    assert status(token_lab)["state"] == "running"
+    presenter.locator(".play-button button").click()
+    wait_status(token_lab, lambda s: s["state"] == "paused")
+    # the scene's websocket: each tab's token opens it, from the scene page's own origin only
+    for page in (presenter, viewer):
+        address, port = scene_socket(page)
+        assert handshake(address, f"http://127.0.0.1:{port}") == 101
+        assert handshake(address, "http://evil.example") == 403
+    assert handshake(address.rsplit("/", 1)[0] + "/", f"http://127.0.0.1:{port}") == 403
+    assert handshake(address.rsplit("/", 1)[0] + "/wrong", f"http://127.0.0.1:{port}") == 403
+    presenter.close()
+    viewer.close()

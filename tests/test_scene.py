@@ -11,6 +11,7 @@ import msgspec
 import numpy as np
 import pytest
 import viser
+from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 import app.drawing as drawing
@@ -315,9 +316,9 @@ def test_pick_disk_maps_a_ray_to_the_disk_under_it():
     assert pick_disk((0.0, 0.0, 10.0), down, np.zeros((0, 2)), np.zeros(0)) is None
 
 
-def _test_client(port):
+def _test_client(port, path="/"):
     """A websocket client that counts as connected (it reports a camera)."""
-    ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None)
+    ws = connect(f"ws://127.0.0.1:{port}{path}", subprotocols=[f"viser-v{viser.__version__}"], max_size=None)
     ws.send(msgspec.msgpack.encode({
         "type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position": [3.0, 3.0, 3.0],
         "fov": 1.3, "near": 0.01, "far": 1000.0, "image_height": 600, "image_width": 800,
@@ -364,6 +365,35 @@ def test_browser_click_on_a_disk_calls_on_pick_and_clients_are_counted(view):
     finally:
         ws.close()
     assert _wait_for(lambda: view.connected_clients == 0)
+
+
+def _click(ws, x, y):
+    ws.send(msgspec.msgpack.encode({
+        "type": "ScenePointerMessage", "event_type": "click", "ray_origin": [x, y, 20.0],
+        "ray_direction": [0.0, 0.0, -1.0], "screen_pos": [[0.5, 0.5]], "modifier": None,
+    }))
+
+
+def test_only_clients_allowed_to_pick_watch_a_disk_and_admit_refuses_before_the_handshake():
+    view = SceneView(port=0, admit=lambda request: None if request.path != "/refused" else "no",
+                     may_pick=lambda path: path == "/presenter")
+    try:
+        with pytest.raises(InvalidStatus, match="403"):
+            _test_client(view.port, "/refused")
+        presenter, watcher = _test_client(view.port, "/presenter"), _test_client(view.port, "/viewer")
+        assert _wait_for(lambda: view.connected_clients == 2)
+        view.draw(small_frame())
+        picked = []
+        done = threading.Event()
+        view.on_pick(lambda index: (picked.append(index), done.set()))
+        _click(watcher, 1.0, 2.0)
+        assert not done.wait(1.0)
+        _click(presenter, 3.1, 2.2)
+        assert done.wait(5.0) and picked == [2]
+        presenter.close()
+        watcher.close()
+    finally:
+        view.close()
 
 
 def test_lab_sized_frame_draws_within_the_frame_budget(view):
