@@ -37,6 +37,7 @@ import tornado.websocket
 from tornado.iostream import StreamClosedError
 from bokeh.server.auth_provider import AuthProvider
 from bokeh.settings import settings as bokeh_settings
+from panel.io.resources import LOCAL_DIST
 from websockets.http11 import Request
 
 from engine.errors import GranLabError
@@ -150,6 +151,11 @@ class Lab:
         return status
 
     def _session(self):
+        # panel points the stylesheets of a document's models at this server only once it renders the
+        # document as a page; a browser slower than the 1 s unused-session lifetime to open its websocket
+        # finds that session discarded and gets a new document, never rendered, whose every stylesheet
+        # would come from cdn.holoviz.org (LOCAL_DIST is relative to "/", where the dashboard is served)
+        pn.state.curdoc.template_variables["dist_url"] = LOCAL_DIST
         self.engine.tabs += 1
         self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)

@@ -145,7 +145,13 @@ def test_the_lab_waits_for_its_first_tab_and_starts_the_preset_at_t0(page, lab):
 def test_the_page_asks_nothing_of_other_hosts_and_logs_no_error_with_the_scene_on(page, lab):
     errors, outside = open_dashboard(page, lab, scene=True)
     page.wait_for_selector("iframe")
-    frame = next(f for f in page.frames if f.url.startswith("http") and f != page.main_frame)
+    frames = []
+    for _ in range(300):  # the iframe is about:blank until its page starts loading
+        frames = [f for f in page.frames if f.url.startswith("http") and f != page.main_frame]
+        if frames:
+            break
+        page.wait_for_timeout(200)
+    frame = frames[0]
     frame.wait_for_function("() => window.__viserTestpoints && window.__viserTestpoints.rendererInfo"
                             " && window.__viserTestpoints.rendererInfo.render.frame > 5", polling=200, timeout=90000)
     count = frame.evaluate("() => window.__viserTestpoints.rendererInfo.render.frame")
