@@ -63,7 +63,7 @@ def headless_rate(particles: int, start: float, end: float) -> float:
         numba.set_num_threads(previous)
 
 
-def _memory(pid: int) -> float:
+def resident_mib(pid: int) -> float:
     """Resident memory of process ``pid`` in MiB (Linux /proc)."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -185,7 +185,7 @@ def _churn(browser, url: str, pid: int, tabs: int) -> dict:
         _open(page, url)
         page.close()
     before = _settle(url, 0)
-    memory_before = _memory(pid)
+    memory_before = resident_mib(pid)
     start = time.perf_counter()
     for _ in range(tabs):
         page = browser.new_page()
@@ -193,7 +193,7 @@ def _churn(browser, url: str, pid: int, tabs: int) -> dict:
         page.close()
     elapsed = time.perf_counter() - start
     after = _settle(url, 0)
-    memory_after = _memory(pid)
+    memory_after = resident_mib(pid)
     return {"tabs_opened": tabs, "tab_seconds": elapsed / max(1, tabs), "threads_before": before["threads"],
             "threads_after": after["threads"], "memory_before_mib": memory_before, "memory_after_mib": memory_after,
             "memory_growth_mib": memory_after - memory_before}

@@ -63,14 +63,15 @@ class SeriesBuffer:
         index = np.arange(self._seq - count, self._seq) % self.capacity
         return self._data[index]
 
-    def since(self, cursor: Cursor) -> tuple[Cursor, bool, dict[str, list]]:
-        """Rows after ``cursor`` as columns; ``reset`` is true when the reader must start over."""
+    def since(self, cursor: Cursor) -> tuple[Cursor, bool, dict[str, np.ndarray]]:
+        """Rows after ``cursor`` as columns (float64 arrays); ``reset`` is true when the reader
+        must start over."""
         with self._lock:
             reset = cursor.generation != self._generation
             rows = self._rows_after(0 if reset else cursor.seq)
             new = Cursor(self._generation, self._seq)
             names = self.columns
-        return new, reset, {name: rows[:, k].tolist() for k, name in enumerate(names)}
+        return new, reset, dict(zip(names, rows.T.copy()))
 
     def array(self) -> np.ndarray:
         """Every row held, oldest first, as an (R, C) array (a copy)."""

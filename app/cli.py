@@ -23,6 +23,8 @@ def build_parser():
     serve.add_argument("--preset", default="ratchet", help="preset shown first (default ratchet)")
     serve.add_argument("--particles", type=int, help="number of disks of the first preset (default: the preset's)")
     serve.add_argument("--seed", type=int, help="seed of the first preset (default 0)")
+    serve.add_argument("--history-mib", type=float, metavar="MIB",
+                       help="memory for the frames kept for saves and movies (default 64 MiB; the oldest go first)")
     # Every render option is read as text and checked by app.render, so that a wrong value is
     # one line naming the option and what is allowed (argparse would print its usage too).
     render = commands.add_parser("render", help="pictures and movies of a run file for slides (.png, .gif, .mp4)")
@@ -68,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
             from .server import serve
 
             changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
+            if args.history_mib is not None:
+                changes["history_mib"] = args.history_mib
             serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
                   **changes)
             return 0

@@ -48,7 +48,7 @@ from .drawing import COLOR_FIELDS, SceneFrame
 from .frames import FrameData, build_frame
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-HISTORY_BYTES = 64 * 2 ** 20
+HISTORY_MIB = 64.0
 CHUNK_SECONDS = 0.02
 SERIES_CAPACITY = {"contacts": 60000, "time": 40000, "block": 40000, "springs": 40000, "cycles": 100000,
                    "replay": 100000}
@@ -171,10 +171,11 @@ class LabEngine:
     """The simulation of one lab server and the thread that runs it.
 
     With ``wait_for_tab`` the preset is built and its kernels compiled, but it starts (at t = 0)
-    only when the first tab opens (command ``tab_opened``)."""
+    only when the first tab opens (command ``tab_opened``). The frames kept for a save or a movie
+    take at most ``history_mib`` MiB (the oldest go first)."""
 
     def __init__(self, data_dir: str | Path, preset: str = "ratchet", frame_rate: float = 30.0,
-                 wait_for_tab: bool = False, **changes):
+                 wait_for_tab: bool = False, history_mib: float = HISTORY_MIB, **changes):
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.frame_interval = 1.0 / frame_rate
@@ -195,6 +196,8 @@ class LabEngine:
         self.scene_fps = lambda: 0.0
         self._stop = threading.Event()
         self._history: deque = deque()
+        self._history_bytes = 0
+        self.history_limit = int(history_mib * 2 ** 20)
         self._rate: deque = deque()
         self._anchor = (time.perf_counter(), 0.0)
         self._thread = threading.Thread(target=self._loop, name="granlab-engine", daemon=True)
@@ -383,6 +386,7 @@ class LabEngine:
         """Show ``source`` (a preset from its start, or a replay at its first frame)."""
         self.source = source
         self._history.clear()
+        self._history_bytes = 0
         self._rate.clear()
         self.error = ""
         self._reset_buffers()
@@ -529,6 +533,7 @@ class LabEngine:
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
                       speed_achieved=simulated / span / status["cycle_time"] if span > 0 and self.running else 0.0,
                       presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history),
+                      history_mib=self._history_bytes / 2 ** 20,
                       analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy,
                       message_seq=self.messages.latest_seq)
         status = jsonable(status)
@@ -542,12 +547,13 @@ class LabEngine:
 
     def _remember(self) -> None:
         """Keep a frame of the running preset (its first view) with the settings in effect
-        (called by the preset at its frame times), within ``HISTORY_BYTES``."""
+        (called by the preset at its frame times), within ``history_limit`` bytes (and at least
+        the last two frames)."""
         snap = self.source.views()[0].sim.snapshot()
-        size = snap.positions.nbytes * 4 + snap.contacts.i.nbytes * 16
         self._history.append((snap, settings_json(self.source.settings)))
-        while len(self._history) > max(2, HISTORY_BYTES // max(1, size)):
-            self._history.popleft()
+        self._history_bytes += snap.nbytes
+        while len(self._history) > 2 and self._history_bytes > self.history_limit:
+            self._history_bytes -= self._history.popleft()[0].nbytes
 
     def _save(self, name: str) -> None:
         preset = self._preset_only("save")

@@ -112,6 +112,12 @@ class LivePlot:
         """Redraw what depends on the status (fits, the cone, ranges)."""
 
 
+def _last(columns: dict, rows: int) -> dict:
+    """The last ``rows`` rows of ``columns``: a new tab pulls whole ring buffers, a path plot keeps
+    ``rows`` segments of them."""
+    return {name: values[-rows:] for name, values in columns.items()}
+
+
 def _stream(source: ColumnDataSource, columns: dict, reset: bool, rollover: int) -> None:
     columns = {name: values for name, values in columns.items() if name in source.data}
     if reset:
@@ -160,20 +166,23 @@ class Segments:
 
     def add(self, keys, xs, ys, extra: dict) -> dict:
         """Columns x0, y0, x1, y1 and the ``extra`` columns (of the segment's end sample) of the
-        new segments."""
-        out = {"x0": [], "y0": [], "x1": [], "y1": [], **{name: [] for name in extra}}
-        for k, (key, x, y) in enumerate(zip(keys, xs, ys)):
-            previous = self.last.get(key)
-            self.last[key] = (x, y)
-            if previous is None:
-                continue
-            out["x0"].append(previous[0])
-            out["y0"].append(previous[1])
-            out["x1"].append(x)
-            out["y1"].append(y)
-            for name, values in extra.items():
-                out[name].append(values[k])
-        return out
+        new segments, as arrays; ``keys`` (n, k) name the path of each of the n samples."""
+        xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+        x0, y0 = np.empty_like(xs), np.empty_like(ys)
+        first = np.zeros(len(xs), dtype=bool)  # a path's first sample ends no segment
+        paths, path = np.unique(keys, axis=0, return_inverse=True)
+        path = path.reshape(-1)  # NumPy 2.0.0 gives it the shape of keys
+        for p, key in enumerate(map(tuple, paths.tolist())):
+            rows = np.flatnonzero(path == p)
+            x0[rows[1:]], y0[rows[1:]] = xs[rows[:-1]], ys[rows[:-1]]
+            if key in self.last:
+                x0[rows[0]], y0[rows[0]] = self.last[key]
+            else:
+                first[rows[0]] = True
+            self.last[key] = (xs[rows[-1]], ys[rows[-1]])
+        keep = ~first
+        return {"x0": x0[keep], "y0": y0[keep], "x1": xs[keep], "y1": ys[keep],
+                **{name: np.asarray(values)[keep] for name, values in extra.items()}}
 
 
 class StrainPlot(LivePlot):
@@ -270,10 +279,11 @@ class LoadStrainPlot(LivePlot):
     def feed(self, series, columns, reset, status):
         if reset:
             self.segments.reset()
+        columns = _last(columns, PATH_ROLLOVER)
         cycle = np.asarray(columns.get("cycle", []))
         keep = cycle >= 0
-        rows = self.segments.add(np.zeros(int(keep.sum())), np.asarray(columns.get("gamma", []))[keep],
-                                 np.asarray(columns.get("q", []))[keep], {"cycle": cycle[keep].tolist()})
+        rows = self.segments.add(np.zeros((int(keep.sum()), 1)), np.asarray(columns.get("gamma", []))[keep],
+                                 np.asarray(columns.get("q", []))[keep], {"cycle": cycle[keep]})
         _stream(self.source, rows, reset, PATH_ROLLOVER)
         if len(cycle) and cycle[keep].size:
             self.cycle = int(cycle[keep].max())
@@ -318,27 +328,32 @@ class ConePlot(LivePlot):
     def feed(self, series, columns, reset, status):
         if reset:
             self.segments.reset()
+        columns = _last(columns, PATH_ROLLOVER)
         normal = np.asarray(columns.get("normal", []), dtype=float)
         tangential = np.asarray(columns.get("tangential", []), dtype=float)
         state = np.asarray(columns.get("status", []), dtype=int)
         watched = [tuple(p) for p in status.get("watched") or []]
         if self.keyed:
-            pairs = list(zip(map(int, columns.get("i", [])), map(int, columns.get("j", []))))
+            pairs = np.column_stack([columns.get("i", []), columns.get("j", [])]).astype(int)
         else:
-            pairs = [watched[0] if watched else (0, 1)] * len(normal)
+            pairs = np.tile(watched[0] if watched else (0, 1), (len(normal), 1))
         labels = dict(zip(watched, status.get("watched_labels") or []))
-        colors = [hex_color(WATCHED_COLORS[(watched.index(p) if p in watched else len(watched)) % len(WATCHED_COLORS)])
-                  for p in pairs]
-        names = [labels.get(pair, "%d–%d" % pair) for pair in pairs]
-        rows = self.segments.add(pairs, normal, tangential, {"t": columns.get("t", []), "color": colors,
-                                                             "label": names})
+        # a colour and a name per contact, not per sample: a new tab pulls tens of thousands of samples
+        paths, path = np.unique(pairs, axis=0, return_inverse=True)
+        paths, path = [tuple(p) for p in paths.tolist()], path.reshape(-1)
+        colors = np.array([hex_color(WATCHED_COLORS[(watched.index(p) if p in watched else len(watched))
+                                                    % len(WATCHED_COLORS)]) for p in paths] or [""])
+        names = np.array([labels.get(p, "%d–%d" % p) for p in paths] or [""])
+        rows = self.segments.add(pairs, normal, tangential, {"t": columns.get("t", []), "color": colors[path],
+                                                             "label": names[path]})
         _stream(self.paths, rows, reset, PATH_ROLLOVER)
         if len(normal):
             self.top = max(self.top, float(np.abs(normal).max()))
         slides = np.flatnonzero(np.isin(state, (STATUS_SLIDE_POS, STATUS_SLIDE_NEG)))
-        marks = {"x": normal[slides].tolist(), "y": tangential[slides].tolist(),
-                 "color": [STATUS_LEGEND[state[k]][1] for k in slides],
-                 "marker": ["triangle" if state[k] == STATUS_SLIDE_POS else "inverted_triangle" for k in slides]}
+        positive = state[slides] == STATUS_SLIDE_POS
+        marks = {"x": normal[slides], "y": tangential[slides],
+                 "color": np.where(positive, STATUS_LEGEND[STATUS_SLIDE_POS][1], STATUS_LEGEND[STATUS_SLIDE_NEG][1]),
+                 "marker": np.where(positive, "triangle", "inverted_triangle")}
         _stream(self.sliding, marks, reset, PATH_ROLLOVER)
 
     def refresh(self, status):

@@ -16,10 +16,13 @@ token of the address it was opened with.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import errno
+import gc
 import io
 import json
 import logging
+import os
 import re
 import secrets
 import socket
@@ -45,10 +48,20 @@ from engine.io.jsonsafe import jsonable
 from engine.io.outputs import check_output
 
 from .dashboard import Dashboard
-from .engine_thread import LabEngine
+from .engine_thread import HISTORY_MIB, LabEngine
 from .scene import SceneView
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+# glibc (None elsewhere) keeps what a closed tab's session freed in the arena of the thread that
+# freed it, one arena per thread up to 8 per core: a lab opened and closed in many tabs would hold
+# it all. Two arenas and a trim after sessions end hand it back.
+LIBC = ctypes.CDLL(None)
+MALLOC_TRIM = getattr(LIBC, "malloc_trim", None)
+MALLOPT = getattr(LIBC, "mallopt", None)
+M_ARENA_MAX = -8
+# the frames kept for saves and movies may take at most half this machine's memory
+MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
+TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
 COOKIE = "granlab-token"
 LOCKED_PAGE = ("<!doctype html><title>GranLab</title><body style='font:20px sans-serif;margin:3em'>"
                "<h1>GranLab</h1><p>This lab is served with tokens: open the full address the presenter gave, "
@@ -116,10 +129,11 @@ class Lab:
     """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
-                 preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False, **changes):
+                 preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False,
+                 history_mib: float = HISTORY_MIB, **changes):
         self.host = host
         self.roles = {secrets.token_urlsafe(16): role for role in ("presenter", "viewer")} if tokens else {}
-        self.engine = LabEngine(data_dir, preset, wait_for_tab=True, **changes)
+        self.engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib, **changes)
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own address: the page embeds it
             self.scene = SceneView(host=host, port=0, admit=self._admit_scene,
                                    may_pick=self._presenter_path if tokens else None)
@@ -127,6 +141,7 @@ class Lab:
         self.engine.scene_fps = self.scene.fps
         self.scene_interval = 1.0 / scene_rate
         self._stop = threading.Event()
+        self._release_pending = False
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
         self.port = port or _free_port(host)
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
@@ -199,6 +214,15 @@ class Lab:
 
     def _closed(self, session_context) -> None:
         self.engine.tabs = max(0, self.engine.tabs - 1)
+        if MALLOC_TRIM is not None and not self._release_pending:
+            self._release_pending = True
+            self.server.io_loop.call_later(TRIM_DELAY, self._release_memory)
+
+    def _release_memory(self) -> None:
+        """Collect the closed sessions' documents (reference cycles) and hand the freed heap back."""
+        self._release_pending = False
+        gc.collect()
+        MALLOC_TRIM(0)
 
     def _push_scene(self) -> None:
         last = -1
@@ -283,20 +307,26 @@ class ClosedTabFilter(logging.Filter):
 
 
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
-          tokens: bool = False, **changes) -> None:
+          tokens: bool = False, history_mib: float = HISTORY_MIB, **changes) -> None:
     """Start the lab and serve until interrupted (prints the URL, or with tokens the presenter's and
     the viewers' URLs; any host but this machine's loopback serves with tokens). ``changes``:
     settings of the first preset (e.g. ``particles=5600``)."""
     check_address(host, port)
     check_output(data_dir, "--data-dir", folder=True)
+    if not 0 < history_mib <= MAX_HISTORY_MIB:
+        raise GranLabError(f"--history-mib {history_mib:g} is not allowed: more than 0 and at most "
+                           f"{MAX_HISTORY_MIB:.0f} (half this machine's memory)")
     tokens = tokens or host not in LOCAL_HOSTS
     for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
         logging.getLogger(name).addFilter(ClosedTabFilter())
     # with tokens any origin is meant (the token and the SameSite cookie guard the lab): bokeh's
     # warning about it would only alarm the presenter
     logging.getLogger("bokeh.server.util").addFilter(lambda record: "wildcard" not in record.getMessage())
+    if MALLOPT is not None:
+        MALLOPT(M_ARENA_MAX, 2)
     print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
-    lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, **changes)
+    lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
+              **changes)
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
               "class)", flush=True)

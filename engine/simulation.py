@@ -169,6 +169,11 @@ class ContactSnapshot:
     def count(self) -> int:
         return int(self.i.shape[0])
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays."""
+        return sum(getattr(self, name).nbytes for name in self.__dataclass_fields__)
+
 
 @dataclass(frozen=True)
 class Snapshot:
@@ -200,6 +205,12 @@ class Snapshot:
     dt: float
     extra: dict = field(default_factory=dict)
     wall_modes: tuple[str, ...] = ()
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays (the contacts' included)."""
+        values = (getattr(self, name) for name in self.__dataclass_fields__)
+        return self.contacts.nbytes + sum(value.nbytes for value in values if isinstance(value, np.ndarray))
 
 
 class Simulation:

@@ -17,7 +17,8 @@ from urllib.parse import parse_qs, urlparse
 import pytest
 from playwright.sync_api import expect
 
-from app.server import endpoint, read_status, spawn
+from app.bench import resident_mib
+from app.server import TRIM_DELAY, endpoint, read_status, spawn
 from engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -414,3 +415,36 @@ def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, t
     assert handshake(address.rsplit("/", 1)[0] + "/wrong", f"http://127.0.0.1:{port}") == 403
     presenter.close()
     viewer.close()
+
+
+@pytest.fixture(scope="module")
+def small_history_lab(tmp_path_factory):
+    """A lab whose frames kept for saves may take 1 MiB: what remains of its memory is the tabs'."""
+    data = tmp_path_factory.mktemp("small-history-lab-data")
+    process, url, _ = spawn(data, "--history-mib", "1")
+    yield {"url": url, "process": process, "data": data}
+    process.terminate()
+    process.wait(timeout=30)
+
+
+def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, small_history_lab):
+    """A class opens and closes tabs all lesson: each tab's session (its document and the series it
+    pulled) must go when it closes. The scene's page is left out to keep the test short."""
+    lab = small_history_lab
+
+    def churn(tabs: int) -> float:
+        for _ in range(tabs):
+            page = browser.new_page()
+            lab_only(page, lab)
+            page.goto(lab["url"])
+            page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0", polling=200, timeout=60000)
+            wait_model(page, "q-gamma-path", "m.data.x0.length > 0")  # the tab pulled the series
+            page.close()
+        wait_status(lab, lambda s: s["tabs"] == 0)
+        time.sleep(TRIM_DELAY + 3.0)
+        return resident_mib(lab["process"].pid)
+
+    before = churn(10)  # the first tabs fill caches that later ones reuse
+    after = churn(20)
+    assert status(lab)["history_mib"] <= 1.0
+    assert after - before < 10.0, f"20 tabs took the server from {before:.1f} to {after:.1f} MiB"

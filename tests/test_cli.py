@@ -155,6 +155,8 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
             ("--port", str(port)): f"--port {port} is in use by another program",
             ("--host", "nosuch.invalid"): "--host 'nosuch.invalid' is not an address of this machine",
             ("--port", "0", "--data-dir", __file__): f"--data-dir {__file__!r} is a file, not a folder",
+            ("--port", "0", "--history-mib", "0"): "--history-mib 0 is not allowed: more than 0 and at most",
+            ("--port", "0", "--history-mib", "nan"): "--history-mib nan is not allowed",
         }
         for args, message in refusals.items():
             process = subprocess.run([sys.executable, "-m", "app.cli", "serve", *args], capture_output=True,

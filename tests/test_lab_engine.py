@@ -50,30 +50,35 @@ def test_safe_path_adds_h5_inside_the_data_folder(tmp_path):
     assert safe_path(tmp_path, "run-2.h5") == tmp_path / "run-2.h5"
 
 
+def lists(columns: dict) -> dict:
+    return {name: values.tolist() for name, values in columns.items()}
+
+
 def test_series_buffer_serves_each_reader_what_it_has_not_seen():
     buffer = SeriesBuffer(("t", "x"), capacity=5)
     first, second = Cursor(), Cursor()
     buffer.extend([(0.0, 1.0), (1.0, 2.0)])
     first, reset, columns = buffer.since(first)
-    assert reset and columns == {"t": [0.0, 1.0], "x": [1.0, 2.0]}
+    assert all(values.dtype == np.float64 for values in columns.values())  # no Python float per value
+    assert reset and lists(columns) == {"t": [0.0, 1.0], "x": [1.0, 2.0]}
     buffer.extend([(2.0, 3.0)])
     first, reset, columns = buffer.since(first)
-    assert not reset and columns["t"] == [2.0]
+    assert not reset and columns["t"].tolist() == [2.0]
     second, reset, columns = buffer.since(second)
-    assert reset and columns["t"] == [0.0, 1.0, 2.0]
+    assert reset and columns["t"].tolist() == [0.0, 1.0, 2.0]
     buffer.extend([(float(k), 0.0) for k in range(3, 10)])  # beyond the capacity: the oldest go
     first, reset, columns = buffer.since(first)
-    assert not reset and columns["t"] == [5.0, 6.0, 7.0, 8.0, 9.0]
+    assert not reset and columns["t"].tolist() == [5.0, 6.0, 7.0, 8.0, 9.0]
     assert buffer.array()[:, 0].tolist() == [5.0, 6.0, 7.0, 8.0, 9.0] and len(buffer) == 5
     buffer.extend(np.array([[10.0, 0.0], [11.0, 0.0]]))  # wraps around the end of the ring
     first, reset, columns = buffer.since(first)
-    assert not reset and columns["t"] == [10.0, 11.0]
+    assert not reset and columns["t"].tolist() == [10.0, 11.0]
     buffer.extend([(float(k), 0.0) for k in range(12, 30)])  # more than the capacity at once
     first, reset, columns = buffer.since(first)
-    assert columns["t"] == [25.0, 26.0, 27.0, 28.0, 29.0]
+    assert columns["t"].tolist() == [25.0, 26.0, 27.0, 28.0, 29.0]
     buffer.reset(("t", "y"))
     first, reset, columns = buffer.since(first)
-    assert reset and columns == {"t": [], "y": []}
+    assert reset and lists(columns) == {"t": [], "y": []}
 
 
 def test_a_control_reaches_the_engine_between_steps(engine):
@@ -245,6 +250,19 @@ def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):
     assert (len(arrows) > 0) == (result.report.values["null_modes"] > 0)
     engine.submit("analyze", kind="volume")
     wait(lambda: any("analysis = volume is not allowed" in text for _, text in last_message(engine)))
+
+
+def test_the_frames_kept_for_a_save_hold_to_their_memory_limit(tmp_path):
+    lab = LabEngine(tmp_path, preset="ratchet16", speed=math.inf, history_mib=0.05)
+    lab.start()
+    try:
+        wait(lambda: lab.status()["history_frames"] > 3 and lab.status()["step"] > 20000)
+        frames = list(lab._history)
+        held = sum(snap.nbytes for snap, _ in frames)
+        assert held <= 0.05 * 2 ** 20 and held + frames[0][0].nbytes > 0.05 * 2 ** 20 * 0.9
+        assert lab.status()["history_mib"] == pytest.approx(held / 2 ** 20)
+    finally:
+        lab.stop()
 
 
 def test_the_lab_runs_at_the_chosen_speed_in_load_cycles_per_second(tmp_path):
