@@ -1,6 +1,6 @@
 """The ``granlab`` command: the engine's commands (:mod:`engine.cli`), ``serve`` (the lab),
-``render`` (pictures and movies of a run file, :mod:`app.render`) and ``bench --lab`` (the lab's
-benchmark)."""
+``render`` (pictures and movies of a run file, :mod:`app.render`), ``export`` (run files for
+ParaView, OVITO and MDAnalysis, :mod:`app.export`) and ``bench --lab`` (the lab's benchmark)."""
 
 from __future__ import annotations
 
@@ -42,6 +42,19 @@ def build_parser():
     render.add_argument("--force", action="store_true", help="write over existing pictures or movies")
     render.add_argument("--json", action="store_true", help="print one JSON object")
     render.set_defaults(handler=_render, printer=_print_render)
+    export = commands.add_parser("export", help="frames of a run file for ParaView (vtk), OVITO (xyz, lammps) or "
+                                                "MDAnalysis (h5md)")
+    export.add_argument("runfile", help="a GranLab run file")
+    export.add_argument("--format", required=True, metavar="FORMAT",
+                        help="vtk (a folder: .pvd and .vtu files), xyz (extended XYZ), lammps (dump custom, and a "
+                             "dump local of the contacts beside it) or h5md (3D H5MD for MDAnalysis)")
+    export.add_argument("--out", required=True, metavar="DIR|FILE",
+                        help="a folder for vtk; a FILE.xyz, FILE.dump or FILE.h5md for the others")
+    export.add_argument("--frames", metavar="A:B:S",
+                        help="a frame K or a range A:B:S, negative counting from the end (default: every frame)")
+    export.add_argument("--force", action="store_true", help="write over existing files")
+    export.add_argument("--json", action="store_true", help="print one JSON object")
+    export.set_defaults(handler=_export, printer=_print_export)
     bench = commands.choices["bench"]
     bench.add_argument("--lab", action="store_true",
                        help="benchmark the lab instead: a served preset streaming to a headless Chromium tab")
@@ -59,6 +72,18 @@ def _render(args) -> dict:
 
 def _print_render(result: dict) -> None:
     from .render import print_summary
+
+    print_summary(result)
+
+
+def _export(args) -> dict:
+    from .export import export_run
+
+    return export_run(args.runfile, args.format, args.out, args.frames, args.force)
+
+
+def _print_export(result: dict) -> None:
+    from .export import print_summary
 
     print_summary(result)
 

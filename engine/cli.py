@@ -347,9 +347,14 @@ def _analyze(args) -> dict:
     from .analysis.report import analyze
     from .analysis.states import read_state
 
-    state = read_state(args.runfile, args.frame, friction=args.mu)
+    given = {name: value for name, value in (("friction", args.mu), ("normal_stiffness", args.kn),
+                                             ("tangential_stiffness", args.kt)) if value is not None}
+    columns = tuple(args.contact_columns.replace(",", " ").split()) if args.contact_columns else None
+    state = read_state(args.runfile, args.frame, law=given, contacts=args.contacts, contact_columns=columns)
     result = analyze(state, args.analysis, load=args.load, seed=args.seed).as_dict()
-    result.update(run_file=args.runfile, source=state.source, particles=state.disks, forces_known=state.forces_known)
+    result.update(run_file=args.runfile, source=state.source, particles=state.disks, forces_known=state.forces_known,
+                  law={"friction": state.law.friction, "normal_stiffness": state.law.normal_stiffness,
+                       "tangential_stiffness": state.law.tangential_stiffness, "given": state.law_given})
     return result
 
 
@@ -358,6 +363,10 @@ def _print_analysis(result) -> None:
     (a :class:`engine.analysis.report.ReportDict`) keeps: "label: text  (note)", the texts aligned."""
     print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
           + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
+    law = result["law"]
+    if not law["given"]:
+        print(f"  contact law assumed, the file carries none: mu = {law['friction']:g}, K_n = "
+              f"{law['normal_stiffness']:g}, K_t = {law['tangential_stiffness']:g} (--mu, --kn, --kt)")
     rows = result.report.rows()
     width = max((len(row.label) for row in rows), default=0) + 1
     for row in rows:
@@ -492,14 +501,25 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--json", action="store_true", help="print one JSON object")
     reproduce.set_defaults(handler=_reproduce, printer=_print_reproduce)
 
-    analyze = commands.add_parser("analyze", help="quasi-static and structural analysis of one frame of a run file")
-    analyze.add_argument("runfile", help="a GranLab run file or any H5MD file with positions, radii and a 2D box")
+    analyze = commands.add_parser("analyze", help="quasi-static and structural analysis of one frame of a run file, "
+                                                  "an H5MD file, a LAMMPS dump or an extended XYZ file")
+    analyze.add_argument("runfile", metavar="FILE",
+                         help="a GranLab run file, an H5MD file with positions, radii and a 2D box, a LAMMPS dump "
+                              "custom (id x y radius|diameter) or an extended XYZ file (radius, Lattice, pbc)")
     analyze.add_argument("analysis", choices=ANALYSES)
     analyze.add_argument("--frame", type=int, default=-1, help="frame index (negative counts from the end; default -1)")
     analyze.add_argument("--load", choices=LOADS, default="auto",
                          help="load increment of stiffness and status (default auto: the walls' loads, else random)")
     analyze.add_argument("--seed", type=int, default=0, help="seed of the random load increment")
-    analyze.add_argument("--mu", type=_float, help="friction coefficient to assume (default: the run's)")
+    analyze.add_argument("--mu", type=_float,
+                         help="friction coefficient to assume (default: the run's; other codes' files: 0.5)")
+    analyze.add_argument("--kn", type=_float, help="normal stiffness K_n to assume (default: the run's; else 1000)")
+    analyze.add_argument("--kt", type=_float, help="tangential stiffness K_t to assume (default: the run's; else 1000)")
+    analyze.add_argument("--contacts", metavar="FILE",
+                         help="a LAMMPS dump local of the contacts (compute pair/local) at the dump's timesteps")
+    analyze.add_argument("--contact-columns", metavar="NAMES",
+                         help="what each column of --contacts holds, in order: id1 id2 fx fy [ftx fty], - for a "
+                              "column to leave out (default: the names in its header)")
     analyze.add_argument("--json", action="store_true", help="print one JSON object")
     analyze.set_defaults(handler=_analyze, printer=_print_analysis)
 

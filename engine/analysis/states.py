@@ -1,4 +1,5 @@
-"""The state the analyses read: from a live simulation, a GranLab run file or any H5MD file.
+"""The state the analyses read: from a live simulation, a GranLab run file, any H5MD file, a
+LAMMPS dump or an extended XYZ file.
 
 :class:`PackingState` holds what :mod:`engine.analysis.stiffness`, :mod:`engine.analysis.packing` and
 :mod:`engine.analysis.fractal` need, under the attribute names of
@@ -7,8 +8,14 @@
 A GranLab run file gives everything, contact forces and statuses included; the contact law and
 the wall modes of the frame come from ``/observables/law`` and ``/observables/walls/mode`` (files
 written before those existed: from ``/parameters``). Any other H5MD file needs positions, radii
-(a ``radius`` or ``diameter`` element) and a 2D box; its contacts are found from the geometry
-(pairs closer than ``gap`` are touching, status non-sliding) and it has no forces.
+(a ``radius`` or ``diameter`` element) and a 2D box; so does an extended XYZ file (a ``radius``
+or ``diameter`` column, ``Lattice`` and ``pbc``) and a LAMMPS ``dump custom`` (``id``, ``x``,
+``y``, ``radius`` or ``diameter``; the box and its periodicity from its header). A 3D file whose
+disks all lie in one plane z = const is read as 2D. Their contacts are found from the geometry
+(pairs closer than ``gap`` are touching, status non-sliding) and they have no forces, except a
+LAMMPS dump given with a ``dump local`` of its contacts (:func:`lammps_contacts`): there the
+forces are LAMMPS's, and a contact whose tangential force is on the Coulomb cone is sliding.
+Other codes' files carry no contact law: it is :class:`ContactLaw`'s default, or what ``law`` says.
 """
 
 from __future__ import annotations
@@ -23,10 +30,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import GranLabError
+from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, read_xyz
 from ..io.h5md import RunFileError, open_run, parameters, read_frame, walls_from_json
+from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
 from ..simulation import ContactSnapshot, Snapshot
-from ..state import STATUS_STICK
+from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 CONTACT_GAP = 1e-6
 """Generic H5MD files: disks closer than this fraction of the mean diameter touch."""
@@ -35,7 +44,8 @@ CONTACT_GAP = 1e-6
 @dataclass(frozen=True)
 class PackingState:
     """One state as the analyses read it. ``forces_known`` is false for a generic H5MD file
-    (contacts from the geometry, forces zero); ``source`` says where it came from."""
+    (contacts from the geometry, forces zero); ``source`` says where it came from; ``law_given``
+    is false when the file carries no contact law (the law is then assumed)."""
 
     positions: np.ndarray
     radii: np.ndarray
@@ -54,6 +64,7 @@ class PackingState:
     step: int
     forces_known: bool
     source: str
+    law_given: bool = True
 
     @classmethod
     def from_snapshot(cls, snap: Snapshot, source: str = "simulation") -> "PackingState":
@@ -67,11 +78,68 @@ class PackingState:
         return int(self.radii.shape[0])
 
 
-def read_state(path: str | Path, frame: int = -1, friction: float | None = None,
-               gap: float = CONTACT_GAP) -> PackingState:
-    """Frame ``frame`` (negative counts from the end) of a GranLab run file or an H5MD file.
-    ``friction`` replaces the law's friction (for a generic file the law is otherwise the
-    default :class:`ContactLaw`); ``gap`` is the contact tolerance of generic files."""
+FORMATS = ("h5md", "lammps", "xyz")
+"""The formats :func:`read_state` reads: H5MD (GranLab's run files included), LAMMPS text dumps,
+extended XYZ."""
+
+SLIDING_TOLERANCE = 1e-6
+"""A contact read from another code slides when |F_t| >= (1 - this) mu F_n (the same tolerance as
+:func:`engine.analysis.stiffness.critical_contacts`)."""
+
+CONTACT_NAMES = {"id1": ("id1", "patom1"), "id2": ("id2", "patom2"), "fx": ("fx", "fnx"), "fy": ("fy", "fny"),
+                 "ftx": ("ftx",), "fty": ("fty",)}
+"""What the columns of a contacts dump may be called (``dump_modify colname``), by meaning: the two
+atom ids, and the force on the first atom, as a vector ``(fx, fy)`` (or ``(fnx, fny)``) plus, when the pair style
+gives it apart (granular styles give the normal part as fx, fy and the tangential part as the
+first extra values p1, p2), ``(ftx, fty)``."""
+
+
+def detect_format(path: str | Path) -> str:
+    """The format of ``path`` among :data:`FORMATS`, from its first bytes (a file named ``.h5``,
+    ``.hdf5`` or ``.h5md`` is H5MD, so that a broken one is named as a broken HDF5 file)."""
+    path = Path(path)
+    if not path.is_file():
+        raise RunFileError(f"{str(path)!r} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
+    if path.suffix.lower() in (".h5", ".hdf5", ".h5md") or h5py.is_hdf5(path):
+        return "h5md"
+    with open(path, "rb") as f:
+        lines = f.read(1024).split(b"\n")
+    if lines[0].strip().startswith(b"ITEM:"):
+        return "lammps"
+    if lines[0].strip().isdigit() and len(lines) > 1:
+        return "xyz"
+    raise RunFileError(f"{str(path)!r} is neither an H5MD file, a LAMMPS text dump (first line 'ITEM: ...') nor an "
+                       f"extended XYZ file (first line the number of particles)")
+
+
+def read_state(path: str | Path, frame: int = -1, law: dict | None = None, gap: float = CONTACT_GAP,
+               contacts: str | Path | None = None, contact_columns: tuple[str, ...] | None = None) -> PackingState:
+    """Frame ``frame`` (negative counts from the end) of a file of :data:`FORMATS`.
+
+    ``law``: values of :class:`ContactLaw` to use instead of the file's (another code's file has
+    none: :class:`ContactLaw`'s default otherwise); ``gap`` the contact tolerance of files without
+    contacts; ``contacts`` a LAMMPS ``dump local`` of the contacts of a LAMMPS dump, its columns
+    named as in :data:`CONTACT_NAMES` or by ``contact_columns`` (one name per column, ``-`` for a
+    column to leave out)."""
+    kind = detect_format(path)
+    if contacts is not None and kind != "lammps":
+        raise RunFileError(f"contacts from {str(contacts)!r} go with a LAMMPS dump, and {str(path)!r} is "
+                           f"{'an H5MD' if kind == 'h5md' else 'an extended XYZ'} file")
+    if kind == "lammps":
+        state = _lammps_state(path, frame, law or {}, gap, contacts, contact_columns)
+    elif kind == "xyz":
+        state = _xyz_state(path, frame, law or {}, gap)
+    else:
+        state = _h5md_state(path, frame, gap)
+        if law:
+            state = dataclasses.replace(state, law=state.law.replace(**law))
+    if state.disks == 0:
+        raise RunFileError(f"{state.source} holds no disks: nothing to analyse")
+    _check_finite(state)
+    return state
+
+
+def _h5md_state(path: str | Path, frame: int, gap: float) -> PackingState:
     with open_run(path) as f:
         if "h5md" not in f or "particles" not in f:
             raise RunFileError(f"{str(path)!r} is not an H5MD file: it has no /h5md and /particles groups")
@@ -79,15 +147,8 @@ def read_state(path: str | Path, frame: int = -1, friction: float | None = None,
         if isinstance(creator, bytes):
             creator = creator.decode()
         if creator == "GranLab" and "contacts/offset" in f:
-            state = _granlab_state(f, frame, str(path))
-        else:
-            state = _generic_state(f, frame, str(path), gap)
-    if state.disks == 0:
-        raise RunFileError(f"frame {frame} of {str(path)!r} holds no disks: nothing to analyse")
-    _check_finite(state)
-    if friction is not None:
-        state = dataclasses.replace(state, law=state.law.replace(friction=friction))
-    return state
+            return _granlab_state(f, frame, str(path))
+        return _generic_state(f, frame, str(path), gap)
 
 
 def _check_finite(state: PackingState) -> None:
@@ -153,8 +214,10 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
     if "box" not in group:
         raise RunFileError(f"{path!r} has no box in {group.name}: a 2D box is needed")
     box = group["box"]
-    if int(box.attrs.get("dimension", 0)) != 2:
-        raise RunFileError(f"{path!r}: the box has dimension {box.attrs.get('dimension')}; only 2D boxes can be analysed")
+    dimension = int(box.attrs.get("dimension", 0))
+    if dimension not in (2, 3):
+        raise RunFileError(f"{path!r}: the box has dimension {box.attrs.get('dimension')}; 2D boxes (or 3D ones whose "
+                           f"disks lie in one plane) can be analysed")
     position = group["position"]
     frames = position["value"].shape[0] if isinstance(position, h5py.Group) else 1
     if frames == 0:
@@ -162,9 +225,10 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
     if not -frames <= index < frames:
         raise RunFileError(f"frame {index} is out of range: {path!r} holds frames 0..{frames - 1}")
     index %= frames
+    source = f"{path} frame {index}"
     positions = np.asarray(_element(group, "position", index, frames), dtype=float)
-    if positions.ndim != 2 or positions.shape[1] != 2:
-        raise RunFileError(f"{path!r}: positions have shape {positions.shape}; (N, 2) is needed")
+    if positions.ndim != 2 or positions.shape[1] != dimension:
+        raise RunFileError(f"{path!r}: positions have shape {positions.shape}; (N, {dimension}) is needed")
     if "radius" in group:
         radii = np.asarray(_element(group, "radius", index, frames), dtype=float)
     elif "diameter" in group:
@@ -175,19 +239,197 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
         raise RunFileError(f"frame {index} of {path!r} holds no disks: nothing to analyse")
     radii = np.broadcast_to(radii, positions.shape[:1]).astype(float)
     edges = np.asarray(_element(box, "edges", index, frames), dtype=float)
-    if edges.shape == (2, 2):
-        if edges[0, 1] != 0.0 or edges[1, 0] != 0.0:
+    if edges.shape == (dimension, dimension):
+        if np.count_nonzero(edges - np.diag(np.diag(edges))):
             raise RunFileError(f"{path!r}: the box is triclinic; only rectangular boxes can be analysed")
         edges = np.diag(edges).copy()
-    if edges.shape != (2,) or not np.all(edges > 0):
-        raise RunFileError(f"{path!r}: box edges {edges.tolist()} are not two positive lengths")
-    boundary = [b.decode() if isinstance(b, bytes) else str(b) for b in box.attrs.get("boundary", ["none", "none"])]
-    periodic = tuple(b == "periodic" for b in boundary)
-    contacts = geometric_contacts(positions, radii, edges, periodic, gap)
+    if edges.shape != (dimension,) or not np.all(edges[:2] > 0):
+        raise RunFileError(f"{path!r}: box edges {edges.tolist()} are not {dimension} lengths, the first two positive")
+    boundary = [b.decode() if isinstance(b, bytes) else str(b)
+                for b in box.attrs.get("boundary", ["none"] * dimension)]
+    periodic = tuple(b == "periodic" for b in boundary[:2])
+    positions = _planar(positions, radii, source)
+    contacts = geometric_contacts(positions, radii, edges[:2], periodic, gap)
     step = int(group["position/step"][index]) if isinstance(position, h5py.Group) else 0
     time = float(group["position/time"][index]) if isinstance(position, h5py.Group) and "time" in position else 0.0
-    return PackingState(positions, radii, contacts, ContactLaw(), (), np.zeros((0, 2)), np.zeros(0), np.zeros(0), (),
-                        edges, edges, periodic, np.zeros((2, 2)), time, step, False, f"{path} frame {index}")
+    return _without_walls(positions, radii, contacts, ContactLaw(), edges[:2], periodic, time, step, False, source)
+
+
+def _planar(positions: np.ndarray, radii: np.ndarray, source: str) -> np.ndarray:
+    """The (N, 2) positions of disks given in 2D or in 3D in one plane z = const; a 3D packing
+    (z spread beyond 1e-9 of the mean diameter) is refused."""
+    if positions.shape[1] == 2:
+        return positions
+    z = positions[:, 2]
+    spread = float(np.ptp(z)) if z.size else 0.0
+    if not spread <= 1e-9 * 2.0 * float(np.mean(radii)):
+        raise RunFileError(f"{source} is a 3D packing: z spreads over {spread:.6g} (from {z.min():.6g} to "
+                           f"{z.max():.6g}); GranLab analyses 2D disks, all at one z")
+    return np.ascontiguousarray(positions[:, :2])
+
+
+def _without_walls(positions, radii, contacts, law, lengths, periodic, time, step, forces_known, source,
+                   stress=None) -> PackingState:
+    lengths = np.asarray(lengths, dtype=float)
+    return PackingState(positions, radii, contacts, law, (), np.zeros((0, 2)), np.zeros(0), np.zeros(0), (),
+                        lengths, lengths, tuple(periodic), np.zeros((2, 2)) if stress is None else stress, time, step,
+                        forces_known, source, law_given=False)
+
+
+def _xyz_state(path: str | Path, frame: int, law: dict, gap: float) -> PackingState:
+    data = read_xyz(path, frame)
+    source = f"{path} frame {data.index}"
+    cell = data.cell
+    if np.count_nonzero(cell[:2, :2] - np.diag(np.diag(cell[:2, :2]))) or np.count_nonzero(cell[:2, 2]) \
+            or np.count_nonzero(cell[2, :2]):
+        raise RunFileError(f"{source}: the Lattice {cell.tolist()} is not rectangular in x and y; only rectangular "
+                           f"cells can be analysed")
+    lengths = np.diag(cell)[:2].copy()
+    if not np.all(lengths > 0):
+        raise RunFileError(f"{source}: the Lattice's x and y lengths {lengths.tolist()} are not positive: a cell "
+                           f"(Lattice=\"Lx 0 0 0 Ly 0 0 0 Lz\") is needed")
+    radii = _sizes(data.arrays, source, "column (Properties=...:radius:R:1)")
+    positions = _planar(data.positions, radii, source)
+    periodic = data.pbc[:2]
+    contacts = geometric_contacts(positions, radii, lengths, periodic, gap)
+    time = float(data.info.get("Time", data.info.get("time", 0.0)))
+    step = int(data.info.get("Timestep", data.info.get("step", 0)))
+    return _without_walls(positions, radii, contacts, ContactLaw(**law), lengths, periodic, time, step, False, source)
+
+
+def _sizes(arrays: dict[str, np.ndarray], source: str, how: str) -> np.ndarray:
+    for name in RADIUS_NAMES:
+        if name in arrays:
+            return np.asarray(arrays[name], dtype=float).reshape(-1)
+    for name in DIAMETER_NAMES:
+        if name in arrays:
+            return 0.5 * np.asarray(arrays[name], dtype=float).reshape(-1)
+    raise RunFileError(f"{source} has no radius or diameter {how}: disk sizes are needed "
+                       f"(columns: {', '.join(sorted(arrays)) or 'none'})")
+
+
+def _lammps_state(path: str | Path, frame: int, law: dict, gap: float, contacts_path: str | Path | None,
+                  contact_columns: tuple[str, ...] | None) -> PackingState:
+    dump = Dump(path, ATOM_ITEM)
+    data = dump.frame(frame)
+    source = f"{path} frame {data.index} (timestep {data.timestep})"
+    columns = {name: data.rows[:, k] for k, name in enumerate(data.columns)}
+    if "id" not in columns:
+        raise RunFileError(f"{source} has no id column (columns: {' '.join(data.columns)}): dump custom with "
+                           f"'id x y radius' is needed")
+    ids = columns["id"].astype(np.int64)
+    order = np.argsort(ids, kind="stable")
+    ids = ids[order]
+    if ids.size and np.any(ids[1:] == ids[:-1]):
+        raise RunFileError(f"{source} lists atom id {int(ids[1:][ids[1:] == ids[:-1]][0])} twice")
+    lower, upper = data.bounds[:, 0], data.bounds[:, 1]
+    axes = []
+    for axis in "xyz":
+        found = next((name for name in (axis, f"{axis}u", f"{axis}s", f"{axis}su") if name in columns), None)
+        if found is None:
+            if axis == "z":
+                break
+            raise RunFileError(f"{source} has no {axis} column (columns: {' '.join(data.columns)}): positions x, y "
+                               f"(or xu, xs, xsu) are needed")
+        k = "xyz".index(axis)
+        values = columns[found][order]
+        axes.append(lower[k] + values * (upper[k] - lower[k]) if "s" in found else values)
+    radii = _sizes(columns, source, "column (dump custom ... radius)")[order]
+    positions = _planar(np.column_stack(axes), radii, source) - lower[:2]
+    lengths = (upper - lower)[:2]
+    if not np.all(lengths > 0):
+        raise RunFileError(f"{source}: the box's x and y lengths {lengths.tolist()} are not positive")
+    periodic = data.periodic[:2]
+    wrap = np.array(periodic)
+    positions[:, wrap] = np.mod(positions[:, wrap], lengths[wrap])
+    contact_law = ContactLaw(**law)
+    if contacts_path is None:
+        contacts = geometric_contacts(positions, radii, lengths, periodic, gap)
+        return _without_walls(positions, radii, contacts, contact_law, lengths, periodic, data.time or 0.0,
+                              data.timestep, False, source)
+    contacts = lammps_contacts(contacts_path, data.timestep, ids, positions, radii, lengths, periodic, contact_law,
+                               contact_columns, gap)
+    return _without_walls(positions, radii, contacts, contact_law, lengths, periodic, data.time or 0.0, data.timestep,
+                          True, source, contact_stress(positions, contacts, lengths))
+
+
+def lammps_contacts(path: str | Path, timestep: int, ids: np.ndarray, positions: np.ndarray, radii: np.ndarray,
+                    lengths: np.ndarray, periodic: tuple[bool, bool], law: ContactLaw,
+                    columns: tuple[str, ...] | None = None, gap: float = CONTACT_GAP) -> ContactSnapshot:
+    """The contacts of a LAMMPS ``dump local`` at ``timestep`` for the disks with atom ``ids``
+    (sorted) at ``positions``: F_n = F·n and F_t = F·t of the force F on the first atom (n from the
+    second atom's nearest image to the first, t = z × n); the elastic normal force is F_n (no
+    cohesion, and no damping at rest), the tangential spring -F_t / K_t (Cundall-Strack); a contact
+    slides when |F_t| reaches mu F_n. Pairs of the neighbour list that do not touch (a gap above
+    the contact tolerance and no force) are left out."""
+    dump = Dump(path, LOCAL_ITEM)
+    if timestep not in dump.timesteps:
+        raise RunFileError(f"{path} has no contacts at timestep {timestep}, the timestep of the packing's frame; it "
+                           f"holds timesteps {', '.join(str(t) for t in dump.timesteps[:8])}"
+                           + (", ..." if len(dump) > 8 else "") + " (pick the matching frame with --frame)")
+    data = dump.frame(dump.timesteps.index(timestep))
+    source = f"{path} timestep {timestep}"
+    if columns is not None:
+        if len(columns) != len(data.columns):
+            raise RunFileError(f"--contact-columns names {len(columns)} columns and {source} has {len(data.columns)} "
+                               f"({' '.join(data.columns)}): one name per column, - for one to leave out")
+        names = tuple(columns)
+    else:
+        names = data.columns
+    meaning = {}
+    for key, aliases in CONTACT_NAMES.items():
+        found = [k for k, name in enumerate(names) if name in aliases]
+        if found:
+            meaning[key] = data.rows[:, found[0]]
+    missing = [key for key in ("id1", "id2", "fx", "fy") if key not in meaning]
+    if missing:
+        raise RunFileError(f"{source} has no {', '.join(missing)} column (columns: {' '.join(data.columns)}): name "
+                           f"them with dump_modify colname or --contact-columns, e.g. id1 id2 fx fy ftx fty")
+    first, second = meaning["id1"].astype(np.int64), meaning["id2"].astype(np.int64)
+    i, j = np.searchsorted(ids, first), np.searchsorted(ids, second)
+    unknown = np.unique(np.concatenate([first[ids[np.minimum(i, ids.size - 1)] != first],
+                                        second[ids[np.minimum(j, ids.size - 1)] != second]]))
+    if unknown.size:
+        raise RunFileError(f"{source} names atom ids the packing's frame does not hold: "
+                           f"{', '.join(str(v) for v in unknown[:5])}" + (" and more" if unknown.size > 5 else ""))
+    force = np.column_stack([meaning["fx"], meaning["fy"]])
+    if "ftx" in meaning and "fty" in meaning:
+        force = force + np.column_stack([meaning["ftx"], meaning["fty"]])
+    wrap = np.array(periodic)
+    delta = positions[i] - positions[j]
+    image = np.where(wrap, np.round(delta / lengths), 0.0)
+    branch = delta - image * lengths
+    distance = np.hypot(branch[:, 0], branch[:, 1])
+    surface = distance - radii[i] - radii[j]
+    keep = (np.abs(force).sum(axis=1) > 0) | (surface <= gap * 2.0 * float(radii.mean()))
+    i, j, image, branch, distance, surface, force = (a[keep] for a in (i, j, image, branch, distance, surface, force))
+    pairs = np.sort(np.column_stack([i, j]), axis=1)
+    if np.unique(pairs, axis=0).shape[0] != pairs.shape[0]:
+        raise RunFileError(f"{source} lists a pair of atoms twice (dump the contacts with newton_pair on, or one "
+                           f"processor)")
+    normal = branch / distance[:, None]
+    fn = np.einsum("ij,ij->i", force, normal)
+    ft = force[:, 1] * normal[:, 0] - force[:, 0] * normal[:, 1]
+    swap = i > j
+    i, j = np.where(swap, j, i), np.where(swap, i, j)
+    image = np.where(swap[:, None], -image, image)
+    limit = law.friction * np.maximum(fn, 0.0)
+    sliding = np.abs(ft) >= (1.0 - SLIDING_TOLERANCE) * limit
+    status = np.where(sliding & (limit > 0), np.where(ft > 0, STATUS_SLIDE_POS, STATUS_SLIDE_NEG), STATUS_STICK)
+    return ContactSnapshot(i=i.astype(np.int64), j=j.astype(np.int64), image=image.astype(np.int64),
+                           status=status.astype(np.int8), normal_force=fn, elastic_normal_force=fn.copy(),
+                           tangential_force=ft, surface_gap=surface, tangential_spring=-ft / law.tangential_stiffness,
+                           rolling_spring=np.zeros_like(fn), rolling_distance=np.zeros_like(fn))
+
+
+def contact_stress(positions: np.ndarray, contacts: ContactSnapshot, lengths: np.ndarray) -> np.ndarray:
+    """The disk-disk stress (1/A) sum F ⊗ l (2 × 2, compression positive) of contacts whose force
+    F on disk i is F_n n + F_t t, with l the branch vector from j's image to i."""
+    delta = positions[contacts.i] - positions[contacts.j] - contacts.image * lengths
+    normal = delta / np.hypot(delta[:, 0], delta[:, 1])[:, None]
+    tangent = np.column_stack([-normal[:, 1], normal[:, 0]])
+    force = contacts.normal_force[:, None] * normal + contacts.tangential_force[:, None] * tangent
+    return force.T @ delta / float(lengths[0] * lengths[1])
 
 
 def geometric_contacts(positions: np.ndarray, radii: np.ndarray, lengths: np.ndarray, periodic: tuple[bool, bool],

@@ -65,18 +65,30 @@ def _extendable(group, name, shape, dtype, chunk_rows=64):
                                 dtype=dtype, chunks=(chunk_rows,) + tuple(max(1, d) for d in shape))
 
 
-def _append(dataset, value) -> None:
+def append_row(dataset, value) -> None:
+    """Append ``value`` to an extendable dataset along its first axis."""
     n = dataset.shape[0]
     dataset.resize((n + 1,) + dataset.shape[1:])
     dataset[n] = value
 
 
-def _time_dependent(group, name, shape, dtype=np.float64, chunk_rows=16):
+def time_dependent(group, name, shape, dtype=np.float64, chunk_rows=16):
+    """An empty H5MD time-dependent element ``name`` (``step``, ``time`` and ``value`` of ``shape``)."""
     element = group.create_group(name)
     _extendable(element, "step", (), np.int64)
     _extendable(element, "time", (), np.float64)
     _extendable(element, "value", shape, dtype, chunk_rows)
     return element
+
+
+def write_h5md_header(f: h5py.File, author: str = "GranLab user", creator: str = "GranLab") -> None:
+    """The ``/h5md`` group of H5MD 1.1: version, author and creator (GranLab's version)."""
+    h5md = f.create_group("h5md")
+    h5md.attrs["version"] = np.array([1, 1])
+    h5md.create_group("author").attrs["name"] = author
+    group = h5md.create_group("creator")
+    group.attrs["name"] = creator
+    group.attrs["version"] = __version__
 
 
 def to_json(value) -> str:
@@ -136,19 +148,14 @@ class RunWriter:
         # "w-" creates the file exclusively (O_EXCL), so a link put there meanwhile is not followed
         f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest")
         self.file = f
-        h5md = f.create_group("h5md")
-        h5md.attrs["version"] = np.array([1, 1])
-        h5md.create_group("author").attrs["name"] = author
-        creator = h5md.create_group("creator")
-        creator.attrs["name"] = "GranLab"
-        creator.attrs["version"] = __version__
+        write_h5md_header(f, author)
         particles = f.create_group("particles/all")
         box = particles.create_group("box")
         box.attrs["dimension"] = 2
         box.attrs["boundary"] = np.array(["periodic" if p else "none" for p in sim.periodic], dtype="S8")
-        _time_dependent(box, "edges", (2,))
+        time_dependent(box, "edges", (2,))
         for name, shape in PARTICLE_ELEMENTS:
-            _time_dependent(particles, name, (n,) + shape)
+            time_dependent(particles, name, (n,) + shape)
         particles.create_dataset("kind", data=sim.particles.kind)
         contacts = f.create_group("contacts")
         contacts.attrs["status_names"] = np.array(STATUS_NAMES, dtype="S12")
@@ -158,15 +165,15 @@ class RunWriter:
         for name, dtype, shape in CONTACT_FIELDS:
             _extendable(contacts, name, shape, dtype, chunk_rows=4096)
         observables = f.create_group("observables")
-        energy = _time_dependent(observables, "energy", (len(ENERGY_FIELDS),))
+        energy = time_dependent(observables, "energy", (len(ENERGY_FIELDS),))
         energy.attrs["fields"] = np.array(ENERGY_FIELDS, dtype="S24")
         walls = observables.create_group("walls")
         walls.attrs["names"] = np.array(sim.walls.names, dtype="S32")
-        _time_dependent(walls, "position", (nw,))
-        _time_dependent(walls, "force", (nw,))
-        _time_dependent(walls, "mode", (nw,), np.int8)
-        _time_dependent(observables, "stress", (2, 2))
-        _time_dependent(observables, "law", (), h5py.string_dtype())
+        time_dependent(walls, "position", (nw,))
+        time_dependent(walls, "force", (nw,))
+        time_dependent(walls, "mode", (nw,), np.int8)
+        time_dependent(observables, "stress", (2, 2))
+        time_dependent(observables, "law", (), h5py.string_dtype())
         cycles = observables.create_group("cycles")
         for name in CYCLE_FIELDS:
             _extendable(cycles, name, (), np.int64 if name in ("cycle", "step") else np.float64)
@@ -181,7 +188,7 @@ class RunWriter:
                                  chunks=(256, max(1, n_watch)))
         if lab_series is not None:
             lab = observables.create_group("lab")
-            _time_dependent(lab, "settings", (), h5py.string_dtype())
+            time_dependent(lab, "settings", (), h5py.string_dtype())
             for name, columns in lab_series.items():
                 _extendable(lab, name, (len(columns),), np.float64, 1024).attrs["columns"] = \
                     np.array(columns, dtype="S32")
@@ -232,9 +239,9 @@ class RunWriter:
         return handle
 
     def _element(self, path: str, step: int, time: float, value) -> None:
-        _append(self._get(f"{path}/value"), value)
-        _append(self._get(f"{path}/time"), time)
-        _append(self._get(f"{path}/step"), step)
+        append_row(self._get(f"{path}/value"), value)
+        append_row(self._get(f"{path}/time"), time)
+        append_row(self._get(f"{path}/step"), step)
 
     def write_frame(self, state, settings: str | None = None) -> None:
         """Append a frame (positions, contacts, observables) from a :class:`Simulation` or a
@@ -259,9 +266,9 @@ class RunWriter:
             dataset = self._get(f"contacts/{name}")
             dataset.resize((start + c.count,) + dataset.shape[1:])
             dataset[start:] = values[name]
-        _append(self._get("contacts/time"), time)
-        _append(self._get("contacts/step"), step)
-        _append(offset, start + c.count)
+        append_row(self._get("contacts/time"), time)
+        append_row(self._get("contacts/step"), step)
+        append_row(offset, start + c.count)
         budget = snap.energy.as_dict()
         self._element("observables/energy", step, time, [budget[k] for k in ENERGY_FIELDS])
         self._element("observables/walls/position", step, time, snap.wall_offsets)

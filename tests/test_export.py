@@ -1,0 +1,206 @@
+"""`granlab export`: a run file's frames for ParaView (vtk), OVITO (xyz, lammps) and MDAnalysis
+(h5md), read back by those tools' own readers (VTK's XML reader, OVITO's importer, MDAnalysis's
+H5MD reader) and by GranLab's, and compared with the run file."""
+
+import functools
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+
+import numpy as np
+import pytest
+
+from app.export import contacts_dump_name
+from app.frames import FrameData, build_frame
+from engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from engine.analysis import stiffness as st
+from engine.analysis.packing import packing_stats
+from engine.analysis.states import read_state
+from engine.generate import radii, random_gas
+from engine.io import h5md
+
+FRAMES = 3
+
+
+def granlab(*args, check=True):
+    """The ``granlab`` command (with the lab's commands) in a process of its own."""
+    process = subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=600)
+    if check and process.returncode != 0:
+        raise AssertionError(process.stderr)
+    return process
+
+
+@functools.cache
+def compressed_run(folder):
+    """A periodic cell of 80 frictional disks compressed at a constant strain rate into a contact
+    network with sticking and sliding contacts (no damping: F_n is the elastic force), 3 frames."""
+    r = radii(80, radius_min=0.4, radius_max=0.6, distribution="uniform", seed=3)
+    positions = random_gas(r, (0, 12.0, 0, 12.0), periodic=(True, True), seed=3)
+    law = ContactLaw(normal_stiffness=1e3, tangential_stiffness=800.0, friction=0.3)
+    sim = Simulation(ParticleState(positions, r), law, Integration(dt_safety=0.2),
+                     cell=PeriodicCell((12.0, 12.0), control=("strain-rate", "strain-rate"), strain_rate=(0.02, 0.02)))
+    sim.run(8500)
+    path = folder / "compressed.h5"
+    with h5md.RunWriter(path, sim) as writer:
+        for _ in range(FRAMES):
+            sim.run(300)
+            writer.write_frame(sim)
+    return path
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory):
+    return compressed_run(tmp_path_factory.mktemp("export"))
+
+
+def frames_of(path):
+    with h5md.open_run(path) as f:
+        return [h5md.read_frame(f, k) for k in range(h5md.frame_count(f))]
+
+
+def vtu_arrays(path):
+    """Points, cell point ids and every named array of a .vtu, read by VTK's own XML reader."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+
+    reader = vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    assert reader.GetErrorCode() == 0
+    grid = reader.GetOutput()
+    arrays = {"points": vtk_to_numpy(grid.GetPoints().GetData()) if grid.GetNumberOfPoints() else np.zeros((0, 3)),
+              "cells": [[grid.GetCell(c).GetPointId(k) for k in range(grid.GetCell(c).GetNumberOfPoints())]
+                        for c in range(grid.GetNumberOfCells())],
+              "types": [grid.GetCellType(c) for c in range(grid.GetNumberOfCells())]}
+    for data in (grid.GetPointData(), grid.GetCellData(), grid.GetFieldData()):
+        for k in range(data.GetNumberOfArrays()):
+            arrays[data.GetArrayName(k)] = vtk_to_numpy(data.GetAbstractArray(k))
+    return arrays
+
+
+def test_vtk_export_is_a_pvd_time_series_of_disks_force_network_and_cell(run_file, tmp_path):
+    out = tmp_path / "paraview"
+    result = json.loads(granlab("export", str(run_file), "--format", "vtk", "--out", str(out), "--json").stdout)
+    assert result["frames"] == FRAMES and len(result["files"]) == 1 + 3 * FRAMES
+    collection = ElementTree.parse(out / "compressed.pvd").getroot()
+    assert collection.get("type") == "Collection"
+    entries = collection.findall("Collection/DataSet")
+    assert len(entries) == 3 * FRAMES
+    for raw in frames_of(run_file):
+        parts = {int(e.get("part")): out / e.get("file") for e in entries if float(e.get("timestep")) == raw["time"]}
+        assert sorted(parts) == [0, 1, 2]
+        scene = build_frame([(FrameData.from_run_frame(raw, np.zeros((0, 2))), (0.0, 0.0))])
+        disks = vtu_arrays(parts[0])
+        n = raw["position"].shape[0]
+        np.testing.assert_array_equal(disks["points"][:, :2], raw["position"])
+        np.testing.assert_array_equal(disks["points"][:, 2], 0.0)
+        assert set(disks["types"]) == {1} and len(disks["types"]) == n  # one vertex per disk
+        for name in ("radius", "omega", "angle", "mass", "coordination", "pressure"):
+            np.testing.assert_array_equal(disks[name], raw[name] if name in raw else getattr(scene, name))
+        np.testing.assert_array_equal(disks["velocity"][:, :2], raw["velocity"])
+        np.testing.assert_array_equal(disks["sliding"], scene.sliding)
+        assert disks["TimeValue"][0] == raw["time"] and disks["step"][0] == raw["step"]
+        network = vtu_arrays(parts[1])
+        c = raw["contacts"]
+        assert len(network["types"]) == c["status"].size > 100 and set(network["types"]) == {3}  # lines
+        for name in ("normal_force", "tangential_force", "status", "tangential_spring", "surface_gap"):
+            np.testing.assert_array_equal(network[name], c[name])
+        np.testing.assert_array_equal(network["i"], c["pair"][:, 0])
+        ends = network["points"][np.array(network["cells"])]
+        np.testing.assert_array_equal(ends[:, 0, :2], raw["position"][c["pair"][:, 0]])
+        length = np.hypot(*(ends[:, 0, :2] - ends[:, 1, :2]).T)  # to j's nearest image, not across the cell
+        assert np.all(length <= 1.0001 * (raw["radius"][c["pair"][:, 0]] + raw["radius"][c["pair"][:, 1]]))
+        assert {2, 3} & set(c["status"]) and 1 in c["status"]  # sliding and sticking contacts are in the file
+        cell = vtu_arrays(parts[2])
+        assert len(cell["types"]) == 4 and set(cell["kind"]) == {1}
+        np.testing.assert_allclose(cell["points"][:, :2].max(axis=0), raw["edges"])
+
+
+def test_xyz_export_is_read_by_ase_and_by_ovito_with_radii_and_the_periodic_cell(run_file, tmp_path):
+    out = tmp_path / "run.xyz"
+    granlab("export", str(run_file), "--format", "xyz", "--out", str(out))
+    raws = frames_of(run_file)
+    for k, raw in enumerate(raws):
+        state = read_state(out, frame=k)
+        np.testing.assert_array_equal(state.radii, raw["radius"])
+        np.testing.assert_allclose(state.positions, raw["position"], rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(state.box_lengths, raw["edges"])
+        assert state.periodic == (True, True) and state.time == raw["time"] and state.step == raw["step"]
+    ovito_io = pytest.importorskip("ovito.io")
+    pipeline = ovito_io.import_file(str(out))
+    assert pipeline.source.num_frames == FRAMES
+    data = pipeline.compute(FRAMES - 1)
+    np.testing.assert_allclose(np.asarray(data.particles["Radius"]), raws[-1]["radius"], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(data.particles["Position"])[:, :2], raws[-1]["position"], rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(data.particles["Velocity"])[:, :2], raws[-1]["velocity"], rtol=1e-12)
+    np.testing.assert_allclose(np.diag(np.asarray(data.cell)[:2, :2]), raws[-1]["edges"], rtol=1e-12)
+    assert tuple(data.cell.pbc) == (True, True, False)
+
+
+def test_lammps_export_reads_back_with_its_contacts_as_the_run_file_does(run_file, tmp_path):
+    """The dump and its dump local give `granlab analyze` the same packing as the run file: the same
+    contacts with the same forces, statuses and springs, z, Phi and rigidity counts."""
+    out = tmp_path / "run.dump"
+    granlab("export", str(run_file), "--format", "lammps", "--out", str(out))
+    law = {"friction": 0.3, "normal_stiffness": 1e3, "tangential_stiffness": 800.0}
+    for frame in range(FRAMES):
+        original = read_state(run_file, frame=frame)
+        exported = read_state(out, frame=frame, law=law, contacts=contacts_dump_name(out))
+        assert exported.forces_known and exported.step == original.step
+        np.testing.assert_allclose(exported.positions, original.positions, rtol=0, atol=1e-12)
+        a, b = original.contacts, exported.contacts
+        order_a, order_b = np.lexsort((a.j, a.i)), np.lexsort((b.j, b.i))
+        for name in ("i", "j", "image", "status"):
+            np.testing.assert_array_equal(getattr(b, name)[order_b], getattr(a, name)[order_a], err_msg=name)
+        for name in ("normal_force", "tangential_force", "tangential_spring", "surface_gap"):
+            np.testing.assert_allclose(getattr(b, name)[order_b], getattr(a, name)[order_a], rtol=1e-9, atol=1e-12,
+                                       err_msg=name)
+        ours, theirs = packing_stats(original), packing_stats(exported)
+        assert (theirs.z, theirs.phi, theirs.rattlers) == (ours.z, ours.phi, ours.rattlers)
+        raw = frames_of(run_file)[frame]
+        kinetic = np.diag(np.sum(raw["mass"][:, None] * raw["velocity"] ** 2, axis=0)) / np.prod(raw["edges"])
+        np.testing.assert_allclose(exported.stress + kinetic, original.stress, rtol=1e-9)  # contacts + kinetic
+        counts = [st.rigidity(st.network(s)) for s in (original, exported)]
+        assert counts[0] == counts[1]
+    ovito_io = pytest.importorskip("ovito.io")
+    data = ovito_io.import_file(str(out)).compute(FRAMES - 1)
+    raw = frames_of(run_file)[-1]
+    np.testing.assert_allclose(np.asarray(data.particles["Radius"]), raw["radius"], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(data.particles["Angular Velocity"])[:, 2], raw["omega"], rtol=1e-12)
+
+
+def test_h5md_export_is_read_by_mdanalysis_in_a_3d_box(run_file, tmp_path):
+    mda = pytest.importorskip("MDAnalysis")
+    out = tmp_path / "run.h5md"
+    granlab("export", str(run_file), "--format", "h5md", "--out", str(out))
+    raws = frames_of(run_file)
+    universe = mda.Universe(str(out), n_atoms=raws[0]["position"].shape[0], convert_units=False)
+    assert universe.trajectory.n_frames == FRAMES
+    for ts, raw in zip(universe.trajectory, raws):
+        np.testing.assert_allclose(universe.atoms.positions[:, :2], raw["position"], rtol=1e-6, atol=1e-5)
+        np.testing.assert_array_equal(universe.atoms.positions[:, 2], 0.0)
+        np.testing.assert_allclose(universe.atoms.velocities[:, :2], raw["velocity"], rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(ts.dimensions, [*raw["edges"], 2 * raw["radius"].max(), 90, 90, 90], rtol=1e-6)
+        assert ts.time == pytest.approx(raw["time"])
+    state = read_state(out)
+    np.testing.assert_array_equal(state.positions, raws[-1]["position"])
+    assert state.periodic == (True, True) and packing_stats(state).z == packing_stats(read_state(run_file)).z
+
+
+def test_bad_exports_get_one_line_and_exit_2(run_file, tmp_path):
+    (tmp_path / "taken.xyz").write_text("mine")
+    cases = [(("--format", "pdb", "--out", str(tmp_path / "x.pdb")), "--format = 'pdb' is not allowed"),
+             (("--format", "xyz", "--out", str(tmp_path / "x.dump")), "a file name ending in .xyz"),
+             (("--format", "vtk", "--out", str(tmp_path / "x.pvd")), "a folder for the .pvd and .vtu files"),
+             (("--format", "xyz", "--out", str(tmp_path / "taken.xyz")), "exists: give --force"),
+             (("--format", "xyz", "--out", str(tmp_path / "x.xyz"), "--frames", "7"), "--frames = '7' is not allowed")]
+    for args, message in cases:
+        process = granlab("export", str(run_file), *args, check=False)
+        assert process.returncode == 2 and message in process.stderr, (args, process.stderr)
+        assert process.stderr.count("\n") == 1, process.stderr
+    assert (tmp_path / "taken.xyz").read_text() == "mine"
+    lammps_dump = tmp_path / "other.dump"
+    lammps_dump.write_text("ITEM: TIMESTEP\n0\n")
+    process = granlab("export", str(lammps_dump), "--format", "xyz", "--out", str(tmp_path / "y.xyz"), check=False)
+    assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
