@@ -352,9 +352,17 @@ class Dashboard:
         """A new preset or replay: its plots, its text, its settings in the widgets."""
         cls = PRESETS.get(shown_as)
         if cls is None:
-            self.key_names = ["replay-energy"]
+            plot = (status.get("replay") or {}).get("plot", "replay-energy")
+            self.key_names = [plot]
             self._use_plots(self.key_names, "t", {})
-            self.teaching.object = f"## {status.get('title', 'Replay')}\nA saved run played back frame by frame."
+            if plot == "replay-energy":
+                self.teaching.object = f"## {status.get('title', 'Replay')}\nA saved run played back frame by frame."
+            else:
+                self.teaching.object = (f"## {status.get('title', 'Replay')}\nA packing made by another code, played "
+                                        "back frame by frame: its coordination z per frame, and the forces of its "
+                                        "contacts when a LAMMPS dump came with `NAME-contacts.dump` beside it. The "
+                                        "Analysis tab analyses the frame shown.")
+                self.color.value = "coordination"  # another code's disks have no rotation angle
         else:
             self.key_names = list(cls.key_plots)
             self._use_plots(list(cls.plots), cls.time_label, cls.series, getattr(cls, "reference_cycle", 0))
@@ -394,7 +402,8 @@ class Dashboard:
         self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
         readout = status.get("readout") or {}
         fit = status.get("strain") or {}
-        parts = [f"<b>{status.get('stage', '')}</b>", f"t = {compact(status.get('time', 0.0))}"]
+        parts = [f"<b>{status.get('stage', '')}</b>",
+                 f"{status.get('time_label', 't')} = {compact(status.get('time', 0.0))}"]
         if "cycle" in status:
             parts.append(f"cycle {status['cycle']}")
         if fit:
@@ -433,7 +442,8 @@ class Dashboard:
             finally:
                 self._syncing = False
             self.timeline_label.object = (f"<div style='font-size:13px;padding-top:18px'>frame {frame + 1} of "
-                                          f"{frames}, t = {compact(status.get('time', 0.0))}</div>")
+                                          f"{frames}, {status.get('time_label', 't')} = "
+                                          f"{compact(status.get('time', 0.0))}</div>")
             self._sync(status)
 
     def _sync(self, status: dict) -> None:

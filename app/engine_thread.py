@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from engine.analysis.report import ANALYSES
-from engine.analysis.states import PackingState, read_state
+from engine.analysis.packing import packing_stats
+from engine.analysis.states import PackingState, detect_format, read_state, read_states
 from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io import h5md
 from engine.io.jsonsafe import jsonable
@@ -54,6 +55,7 @@ SERIES_CAPACITY = {"contacts": 60000, "time": 40000, "block": 40000, "springs": 
                    "replay": 100000}
 """Rows each series keeps (a tab that falls further behind gets the newest ones)."""
 MOVIE_SUFFIXES = (".gif", ".mp4")
+REPLAY_SUFFIXES = (".h5", ".h5md", ".dump", ".xyz")
 
 
 def safe_path(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
@@ -94,8 +96,13 @@ def settings_json(settings: LabSettings) -> str:
 
 
 class Replay:
-    """A run file played back on a timeline: its frames, and the lab's series up to the frame
-    shown (a lab run holds them, with the settings of each frame; any run file has its energy)."""
+    """A file played back on a timeline: its frames, and the series up to the frame shown.
+
+    A GranLab run file gives its energy (and a lab run the lab's series, with the settings of
+    each frame). Another code's packing (a LAMMPS dump, with the contacts of ``STEM-contacts.dump``
+    beside it when there is one; an extended XYZ file; any H5MD file) gives the coordination z and
+    the solid fraction Φ of each frame; its frames are timed by the file's times, else its
+    timesteps, else their order."""
 
     title = "Replay"
     controls: tuple[str, ...] = ()
@@ -103,6 +110,15 @@ class Replay:
     def __init__(self, path: Path):
         self.path = path
         self.name = f"replay:{path.name}"
+        self.contacts = None
+        if detect_format(path) == "h5md" and _is_run_file(path):
+            self._read_run(path)
+        else:
+            self._read_packing(path)
+        self._fit: tuple[int, dict | None] = (-1, None)
+        self.index = 0
+
+    def _read_run(self, path: Path) -> None:
         with h5md.open_run(path) as f:
             self.count = h5md.frame_count(f)
             if self.count == 0:
@@ -126,10 +142,37 @@ class Replay:
         self.series: dict[str, tuple[tuple[str, ...], np.ndarray]] = {
             "replay": (("t", "step") + fields, np.column_stack([self.times, steps, energy]))}
         self.series.update(lab)
+        self.plot = "replay-energy"
+        self.time_label = "t"
+        self.readouts = None
         self.watched = [tuple(pair) for pair in protocol.get("watched", [])]
         self.watched_labels = list(protocol.get("watched_labels", []))
-        self._fit: tuple[int, dict | None] = (-1, None)
-        self.index = 0
+
+    def _read_packing(self, path: Path) -> None:
+        contacts = path.with_name(f"{path.stem}-contacts{path.suffix}")
+        self.contacts = contacts if detect_format(path) == "lammps" and contacts.is_file() else None
+        states = read_states(path, contacts=self.contacts)
+        self.count = len(states)
+        self.normals = np.zeros((0, 2))
+        self.frames = [_packing_frame(k, state) for k, state in enumerate(states)]
+        times = np.array([state.time for state in states], dtype=float)
+        steps = np.array([state.step for state in states], dtype=float)
+        frames = np.arange(1, self.count + 1, dtype=float)
+        increasing = [bool(self.count == 1 or np.all(np.diff(t) > 0)) for t in (times, steps)]
+        self.time_label = "t" if increasing[0] and times.any() else ("timestep" if increasing[1] else "frame")
+        self.times = {"t": times, "timestep": steps, "frame": frames}[self.time_label]
+        self.of = None
+        self.clock_unit = "tens of frames"
+        span = float(self.times[-1] - self.times[0])
+        self.cycle_time = 10.0 * span / max(1, self.count - 1) or 1.0
+        self.speed = 1.0
+        stats = [packing_stats(state) for state in states]
+        self.readouts = [{"phi": s.phi, "z": s.z} for s in stats]
+        self.series = {"replay": (("t", "step", "frame", "z", "phi"),
+                                  np.column_stack([self.times, steps, frames, [s.z for s in stats],
+                                                   [s.phi for s in stats]]))}
+        self.plot = "replay-structure"
+        self.watched, self.watched_labels = [], []
 
     def _strain_fit(self, until: float) -> dict | None:
         """The strain fit of the cycles recorded up to ``until``, as the preset showed it."""
@@ -157,14 +200,35 @@ class Replay:
 
     def status(self) -> dict:
         frame = self.frames[self.index]
-        return {"preset": self.name, "title": f"Replay of {self.path.name}",
-                "stage": f"frame {self.index + 1} of {self.count}", "time": frame["time"], "step": frame["step"],
-                "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
-                "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed, "window": 0.0,
-                "watched": [list(pair) for pair in self.watched], "watched_labels": self.watched_labels,
-                "strain": self._strain_fit(frame["time"]),
-                "replay": {"of": self.of, "frame": self.index, "frames": self.count,
-                           "start": float(self.times[0]), "end": float(self.times[-1])}}
+        status = {"preset": self.name, "title": f"Replay of {self.path.name}",
+                  "stage": f"frame {self.index + 1} of {self.count}", "time": float(self.times[self.index]),
+                  "time_label": self.time_label, "step": frame["step"],
+                  "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
+                  "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed, "window": 0.0,
+                  "watched": [list(pair) for pair in self.watched], "watched_labels": self.watched_labels,
+                  "strain": self._strain_fit(frame["time"]),
+                  "replay": {"of": self.of, "frame": self.index, "frames": self.count, "plot": self.plot,
+                             "start": float(self.times[0]), "end": float(self.times[-1])}}
+        if self.readouts is not None:
+            status["readout"] = self.readouts[self.index]
+        return status
+
+
+def _is_run_file(path: Path) -> bool:
+    with h5md.open_run(path) as f:
+        return "contacts/offset" in f and "parameters" in f
+
+
+def _packing_frame(index: int, state: PackingState) -> dict:
+    """A frame of another code's packing as :meth:`FrameData.from_run_frame` reads it (no walls;
+    the disks do not turn)."""
+    c = state.contacts
+    return {"index": index, "time": state.time, "step": state.step, "position": state.positions,
+            "radius": state.radii, "angle": np.zeros(state.disks), "edges": state.box_lengths,
+            "boundary": ["periodic" if p else "none" for p in state.periodic],
+            "contacts": {"pair": np.column_stack([c.i, c.j]), "image": c.image, "status": c.status,
+                         "normal_force": c.normal_force, "tangential_force": c.tangential_force,
+                         "surface_gap": c.surface_gap}}
 
 
 class LabEngine:
@@ -267,7 +331,10 @@ class LabEngine:
         return buffer.since(cursor)
 
     def saved_files(self) -> list[str]:
-        return sorted(path.name for path in self.data_dir.glob("*.h5"))
+        """The files of the data folder a replay can show: run files and H5MD files, LAMMPS dumps
+        of atoms (not their ``-contacts`` dumps), extended XYZ files."""
+        return sorted(path.name for path in self.data_dir.iterdir() if path.suffix in REPLAY_SUFFIXES
+                      and not path.stem.endswith("-contacts")) if self.data_dir.is_dir() else []
 
     # ------------------------------------------------------------------ the thread
     def _loop(self) -> None:
@@ -604,8 +671,8 @@ class LabEngine:
         path = safe_path(self.data_dir, name)
         self._switch(Replay(path))
         self.running = True
-        self._info(f"replaying {path.name}: {self.source.count} frames, t = {self.source.times[0]:.4g} to "
-                   f"{self.source.times[-1]:.4g}", "load")
+        self._info(f"replaying {path.name}: {self.source.count} frames, {self.source.time_label} = "
+                   f"{self.source.times[0]:.4g} to {self.source.times[-1]:.4g}", "load")
 
     def _record(self, name: str, seconds: float, color: str = "rotation") -> None:
         """Render the kept frames of the last ``seconds`` of simulated time into a movie in the
@@ -653,7 +720,7 @@ class LabEngine:
         if isinstance(self.source, Preset):
             state = PackingState.from_snapshot(self.source.views()[0].sim.snapshot(), source=self.source.title)
         else:
-            state = read_state(self.source.path, self.source.index)
+            state = read_state(self.source.path, self.source.index, contacts=self.source.contacts)
         self.analysis.request(state, kind)
         self._info(f"analysis: {kind} of the state at t = {state.time:.4g} started", "analysis")
 

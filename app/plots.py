@@ -426,6 +426,9 @@ LINES = {
                       "columns": ("t", "step", "kinetic", "stored", "dissipated", "balance"),
                       "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
                                 ("t", "dissipated", "dissipated", "#d62728"), ("t", "balance", "balance", "#000000")]},
+    "replay-structure": {"title": "Coordination of the replayed packing", "series": "replay", "x": "frame",
+                         "y": "z (contacts per disk)", "columns": ("t", "step", "frame", "z", "phi"),
+                         "lines": [("frame", "z", "z", "#1f77b4")]},
 }
 """The plots that are lines of one series: title, series, axis labels (x: the preset's time
 label unless given) and lines (x column, y column, legend label, colour)."""

@@ -176,7 +176,7 @@ def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
     engine.submit("pause")
     engine.submit("seek", index=frames - 1)
     status = wait(lambda: engine.status() if engine.status()["replay"]["frame"] == frames - 1 else None)
-    assert status["replay"] == {"of": "ratchet16", "frame": frames - 1, "frames": frames,
+    assert status["replay"] == {"of": "ratchet16", "frame": frames - 1, "frames": frames, "plot": "replay-energy",
                                 "start": first["time"], "end": last["time"]}
     assert status["settings"]["amplitude"] == 0.25 and status["time"] == last["time"]
     _, reset, columns = engine.series("time", Cursor())
@@ -224,6 +224,36 @@ def test_refused_file_names_leave_the_data_folder_untouched(engine, tmp_path):
     level, text = last_message(engine, seq)[-1]
     assert level == "error" and "missing.h5" in text
     assert engine.status()["preset"] == "ratchet16" and engine.status()["state"] == "running"
+
+
+def test_a_lammps_packing_in_the_data_folder_replays_with_its_contacts_and_is_analysed(engine, tmp_path):
+    """Load and replay takes another code's packing: a LAMMPS dump with the dump local of its
+    contacts beside it (STEM-contacts.dump) shows its frames, timed by their timesteps, with
+    LAMMPS's forces in the scene and z per frame; the status analysis uses those forces."""
+    from tests.test_foreign_files import CONTACTS, PACKING, XYZ
+
+    (tmp_path / "jammed.dump").write_bytes(PACKING.read_bytes())
+    (tmp_path / "jammed-contacts.dump").write_bytes(CONTACTS.read_bytes())
+    (tmp_path / "jammed.xyz").write_bytes(XYZ.read_bytes())
+    assert {"jammed.dump", "jammed.xyz"} <= set(engine.saved_files())
+    assert "jammed-contacts.dump" not in engine.saved_files()
+    engine.submit("load", name="jammed.dump")
+    status = wait(lambda: engine.status() if engine.status()["preset"] == "replay:jammed.dump" else None)
+    assert status["replay"]["frames"] == 3 and status["replay"]["plot"] == "replay-structure"
+    assert (status["replay"]["start"], status["replay"]["end"]) == (1337000.0, 1339000.0)
+    assert status["particles"] == 200
+    _, _, columns = engine.series("replay", Cursor())
+    assert columns["z"][0] == pytest.approx(4.13)
+    frame = wait(lambda: engine.frame(timeout=1.0)[1])
+    assert frame.positions.shape == (200, 2) and frame.cell is not None
+    assert len(frame.contact_force) == 413 and np.all(frame.contact_force > 0)  # LAMMPS's forces
+    engine.submit("pause")
+    engine.submit("analyze", kind="status")
+    result = wait(lambda: engine.analysis.latest() if engine.analysis.latest().seq == 1 else None)
+    assert result.error == "" and result.state.forces_known and result.report.values["contacts"] == 413
+    engine.submit("load", name="jammed.xyz")
+    status = wait(lambda: engine.status() if engine.status()["preset"] == "replay:jammed.xyz" else None)
+    assert status["replay"]["frames"] == 1 and status["particles"] == 200
 
 
 def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):

@@ -30,8 +30,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import GranLabError
-from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, read_xyz
-from ..io.h5md import RunFileError, open_run, parameters, read_frame, walls_from_json
+from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, XYZFrame, read_xyz_frames
+from ..io.h5md import RunFileError, frame_count, open_run, parameters, read_frame, walls_from_json
 from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
 from ..simulation import ContactSnapshot, Snapshot
@@ -121,22 +121,70 @@ def read_state(path: str | Path, frame: int = -1, law: dict | None = None, gap: 
     contacts; ``contacts`` a LAMMPS ``dump local`` of the contacts of a LAMMPS dump, its columns
     named as in :data:`CONTACT_NAMES` or by ``contact_columns`` (one name per column, ``-`` for a
     column to leave out)."""
-    kind = detect_format(path)
-    if contacts is not None and kind != "lammps":
-        raise RunFileError(f"contacts from {str(contacts)!r} go with a LAMMPS dump, and {str(path)!r} is "
-                           f"{'an H5MD' if kind == 'h5md' else 'an extended XYZ'} file")
-    if kind == "lammps":
-        state = _lammps_state(path, frame, law or {}, gap, contacts, contact_columns)
-    elif kind == "xyz":
-        state = _xyz_state(path, frame, law or {}, gap)
-    else:
-        state = _h5md_state(path, frame, gap)
-        if law:
-            state = dataclasses.replace(state, law=state.law.replace(**law))
-    if state.disks == 0:
-        raise RunFileError(f"{state.source} holds no disks: nothing to analyse")
-    _check_finite(state)
-    return state
+    reader = StateReader(path, law, gap, contacts, contact_columns)
+    return reader.read(reader.index(frame))
+
+
+def read_states(path: str | Path, **options) -> list[PackingState]:
+    """Every frame of a file, each file read (or indexed) once; ``options`` as :func:`read_state`'s."""
+    reader = StateReader(path, **options)
+    return [reader.read(k) for k in range(reader.count)]
+
+
+class StateReader:
+    """The frames of one file of :data:`FORMATS` (arguments as :func:`read_state`'s): ``count``
+    frames, :meth:`read` one."""
+
+    def __init__(self, path: str | Path, law: dict | None = None, gap: float = CONTACT_GAP,
+                 contacts: str | Path | None = None, contact_columns: tuple[str, ...] | None = None):
+        self.path, self.law, self.gap, self.contact_columns = path, law or {}, gap, contact_columns
+        self.kind = detect_format(path)
+        if contacts is not None and self.kind != "lammps":
+            raise RunFileError(f"contacts from {str(contacts)!r} go with a LAMMPS dump, and {str(path)!r} is "
+                               f"{'an H5MD' if self.kind == 'h5md' else 'an extended XYZ'} file")
+        if self.kind == "lammps":
+            self.dump = Dump(path, ATOM_ITEM)
+            self.contacts = None if contacts is None else Dump(contacts, LOCAL_ITEM)
+            self.count = len(self.dump)
+        elif self.kind == "xyz":
+            self.frames = read_xyz_frames(path)
+            self.count = len(self.frames)
+        else:
+            self.count = _h5md_frames(path)
+
+    def index(self, frame: int) -> int:
+        """``frame`` (negative counts from the end) checked against the file's frames."""
+        if not -self.count <= frame < self.count:
+            raise RunFileError(f"frame {frame} is out of range: {self.path} holds frames 0..{self.count - 1}")
+        return frame % self.count
+
+    def read(self, index: int) -> PackingState:
+        if self.kind == "lammps":
+            state = _lammps_state(self.dump, index, self.law, self.gap, self.contacts, self.contact_columns)
+        elif self.kind == "xyz":
+            state = _xyz_state(self.frames[index], self.path, self.law, self.gap)
+        else:
+            state = _h5md_state(self.path, index, self.gap)
+            if self.law:
+                state = dataclasses.replace(state, law=state.law.replace(**self.law))
+        if state.disks == 0:
+            raise RunFileError(f"{state.source} holds no disks: nothing to analyse")
+        _check_finite(state)
+        return state
+
+
+def _h5md_frames(path: str | Path) -> int:
+    """Frames of an H5MD file: complete frames of a GranLab run file, else of its position element."""
+    with open_run(path) as f:
+        if "h5md" not in f or "particles" not in f:
+            raise RunFileError(f"{str(path)!r} is not an H5MD file: it has no /h5md and /particles groups")
+        if "contacts/offset" in f:
+            return frame_count(f)
+        group = _particle_group(f, str(path))
+        if "position" not in group:
+            raise RunFileError(f"{str(path)!r} has no position element in {group.name}: not an H5MD particle file")
+        position = group["position"]
+        return position["value"].shape[0] if isinstance(position, h5py.Group) else 1
 
 
 def _h5md_state(path: str | Path, frame: int, gap: float) -> PackingState:
@@ -276,8 +324,7 @@ def _without_walls(positions, radii, contacts, law, lengths, periodic, time, ste
                         forces_known, source, law_given=False)
 
 
-def _xyz_state(path: str | Path, frame: int, law: dict, gap: float) -> PackingState:
-    data = read_xyz(path, frame)
+def _xyz_state(data: XYZFrame, path: str | Path, law: dict, gap: float) -> PackingState:
     source = f"{path} frame {data.index}"
     cell = data.cell
     if np.count_nonzero(cell[:2, :2] - np.diag(np.diag(cell[:2, :2]))) or np.count_nonzero(cell[:2, 2]) \
@@ -308,11 +355,10 @@ def _sizes(arrays: dict[str, np.ndarray], source: str, how: str) -> np.ndarray:
                        f"(columns: {', '.join(sorted(arrays)) or 'none'})")
 
 
-def _lammps_state(path: str | Path, frame: int, law: dict, gap: float, contacts_path: str | Path | None,
+def _lammps_state(dump: Dump, frame: int, law: dict, gap: float, contacts: Dump | None,
                   contact_columns: tuple[str, ...] | None) -> PackingState:
-    dump = Dump(path, ATOM_ITEM)
     data = dump.frame(frame)
-    source = f"{path} frame {data.index} (timestep {data.timestep})"
+    source = f"{dump.path} frame {data.index} (timestep {data.timestep})"
     columns = {name: data.rows[:, k] for k, name in enumerate(data.columns)}
     if "id" not in columns:
         raise RunFileError(f"{source} has no id column (columns: {' '.join(data.columns)}): dump custom with "
@@ -343,26 +389,26 @@ def _lammps_state(path: str | Path, frame: int, law: dict, gap: float, contacts_
     wrap = np.array(periodic)
     positions[:, wrap] = np.mod(positions[:, wrap], lengths[wrap])
     contact_law = ContactLaw(**law)
-    if contacts_path is None:
-        contacts = geometric_contacts(positions, radii, lengths, periodic, gap)
-        return _without_walls(positions, radii, contacts, contact_law, lengths, periodic, data.time or 0.0,
+    if contacts is None:
+        found = geometric_contacts(positions, radii, lengths, periodic, gap)
+        return _without_walls(positions, radii, found, contact_law, lengths, periodic, data.time or 0.0,
                               data.timestep, False, source)
-    contacts = lammps_contacts(contacts_path, data.timestep, ids, positions, radii, lengths, periodic, contact_law,
-                               contact_columns, gap)
-    return _without_walls(positions, radii, contacts, contact_law, lengths, periodic, data.time or 0.0, data.timestep,
-                          True, source, contact_stress(positions, contacts, lengths))
+    found = lammps_contacts(contacts, data.timestep, ids, positions, radii, lengths, periodic, contact_law,
+                            contact_columns, gap)
+    return _without_walls(positions, radii, found, contact_law, lengths, periodic, data.time or 0.0, data.timestep,
+                          True, source, contact_stress(positions, found, lengths))
 
 
-def lammps_contacts(path: str | Path, timestep: int, ids: np.ndarray, positions: np.ndarray, radii: np.ndarray,
+def lammps_contacts(dump: Dump, timestep: int, ids: np.ndarray, positions: np.ndarray, radii: np.ndarray,
                     lengths: np.ndarray, periodic: tuple[bool, bool], law: ContactLaw,
                     columns: tuple[str, ...] | None = None, gap: float = CONTACT_GAP) -> ContactSnapshot:
-    """The contacts of a LAMMPS ``dump local`` at ``timestep`` for the disks with atom ``ids``
+    """The contacts of a LAMMPS ``dump local`` (indexed) at ``timestep`` for the disks with atom ``ids``
     (sorted) at ``positions``: F_n = F·n and F_t = F·t of the force F on the first atom (n from the
     second atom's nearest image to the first, t = z × n); the elastic normal force is F_n (no
     cohesion, and no damping at rest), the tangential spring -F_t / K_t (Cundall-Strack); a contact
     slides when |F_t| reaches mu F_n. Pairs of the neighbour list that do not touch (a gap above
     the contact tolerance and no force) are left out."""
-    dump = Dump(path, LOCAL_ITEM)
+    path = dump.path
     if timestep not in dump.timesteps:
         raise RunFileError(f"{path} has no contacts at timestep {timestep}, the timestep of the packing's frame; it "
                            f"holds timesteps {', '.join(str(t) for t in dump.timesteps[:8])}"

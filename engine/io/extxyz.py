@@ -41,8 +41,8 @@ class XYZFrame:
     info: dict = field(default_factory=dict)
 
 
-def read_xyz(path: str | Path, frame: int = -1) -> XYZFrame:
-    """Frame ``frame`` (negative counts from the end) of an extended XYZ file."""
+def read_xyz_frames(path: str | Path) -> list[XYZFrame]:
+    """Every frame of an extended XYZ file."""
     import ase.io
 
     path = Path(path)
@@ -54,17 +54,17 @@ def read_xyz(path: str | Path, frame: int = -1) -> XYZFrame:
         raise RunFileError(f"{path} is not a readable extended XYZ file: {error or type(error).__name__}") from None
     if not frames:
         raise RunFileError(f"{path} holds no frame")
-    if not -len(frames) <= frame < len(frames):
-        raise RunFileError(f"frame {frame} is out of range: {path} holds frames 0..{len(frames) - 1}")
-    index = frame % len(frames)
-    atoms = frames[index]
+    return [_frame(path, index, atoms, len(frames)) for index, atoms in enumerate(frames)]
+
+
+def _frame(path: Path, index: int, atoms, count: int) -> XYZFrame:
     info = dict(atoms.info)
     origin = np.asarray(info.pop("Origin", np.zeros(3)), dtype=float).reshape(-1)
     if origin.shape != (3,):
         raise RunFileError(f"{path}, frame {index}: Origin holds {origin.size} numbers; 3 are needed")
     arrays = {name.lower(): np.asarray(value) for name, value in atoms.arrays.items() if name != "numbers"}
     positions = arrays.pop("positions") - origin
-    return XYZFrame(index, len(frames), positions, np.asarray(atoms.cell[:], dtype=float), origin,
+    return XYZFrame(index, count, positions, np.asarray(atoms.cell[:], dtype=float), origin,
                     tuple(bool(p) for p in atoms.pbc), arrays, info)
 
 
