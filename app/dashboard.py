@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import panel as pn
-from bokeh.models import ColumnDataSource
 
 from engine.analysis.report import ANALYSES
 from engine.params import TANGENTIAL_MODELS
@@ -30,7 +29,7 @@ from engine.protocols.presets import CONTROL_LABELS, PRESETS
 from . import analysis
 from .buffers import Cursor
 from .drawing import COLOR_FIELDS, legend_html
-from .plots import compact, lab_figure, legend_above, make_plot
+from .plots import AnalysisFigures, compact, make_plot
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 PRESET_OPTIONS = {cls.title: name for name, cls in PRESETS.items()}
@@ -273,37 +272,9 @@ class Dashboard:
             "minimum sliding, drawn as a force network; <i>stiffness</i>: the mechanism, as green arrows in the "
             "3D scene; <i>rigidity</i>: Gilabert's counts; <i>packing</i>: Φ, z, forces, with the (N, T) scatter; "
             "<i>fractal</i>: I(k) and its fit.</p>", css_classes=["analysis-summary"], sizing_mode="stretch_width")
-        self.analysis_sources = {name: ColumnDataSource(columns, name=f"analysis-{name}") for name, columns in (
-            ("segments", {"x0": [], "y0": [], "x1": [], "y1": [], "color": []}),
-            ("critical", {"x": [], "y": [], "color": []}), ("forces", {"normal": [], "tangential": []}),
-            ("lines", {"xs": [], "ys": []}), ("data", {"k": [], "intensity": []}), ("fit", {"k": [], "fitted": []}))}
-        src = self.analysis_sources
-        network = lab_figure("analysis-network", "Contacts by the status minimum sliding gives", "x", "y",
-                             match_aspect=True, aspect_scale=1.0)
-        network.segment("x0", "y0", "x1", "y1", color="color", source=src["segments"], line_width=1.5)
-        network.scatter("x", "y", color="color", source=src["critical"], size=8, marker="diamond")
-        for color, text, glyph in (("#1f77b4", "non-sliding", "line"), ("#d62728", "sliding", "line"),
-                                   ("#ff7f0e", "critical, as the dynamics has it", "diamond"),
-                                   ("#d62728", "critical, the dynamics disagrees", "diamond")):
-            nowhere = np.array([np.nan])
-            if glyph == "line":
-                network.line(nowhere, nowhere, color=color, line_width=2, legend_label=text)
-            else:
-                network.scatter(nowhere, nowhere, color=color, marker="diamond", size=8, legend_label=text)
-        legend_above(network, columns=2)
-        forces = lab_figure("analysis-forces", "Interaction forces (N, T) (Gilabert Fig. 14)", "N (paper units)",
-                            "T (paper units)")
-        forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5, legend_label="an interaction")
-        forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed",
-                          legend_label="T = ±√3 N")
-        legend_above(forces)
-        structure = lab_figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k (1/length)",
-                               "I(k) (Eq. 25)", x_axis_type="log", y_axis_type="log")
-        structure.scatter("k", "intensity", source=src["data"], size=4, legend_label="I(k) of the state")
-        structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2, legend_label="fit of Eq. 28")
-        legend_above(structure)
+        self.analysis_plots = AnalysisFigures()
         self.analysis_figures = {name: pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=320, visible=False)
-                                 for name, fig in (("network", network), ("forces", forces), ("structure", structure))}
+                                 for name, fig in self.analysis_plots.figures.items()}
         # the pictures first: on a 768-pixel screen the table below them scrolls
         return pn.Column(pn.Row(self.analysis_kind, self.analysis_button), self._note_pane("analysis"),
                          *self.analysis_figures.values(), self.analysis_text, sizing_mode="stretch_both", scroll=True)
@@ -314,21 +285,11 @@ class Dashboard:
             return
         self._analysis_seen = result.seq
         self.analysis_text.object = analysis.summary(result)
-        figures = result.report.figures if result.report is not None else ()
+        figures = self.analysis_plots.show(result)
         for name, pane in self.analysis_figures.items():
             pane.visible = pane.object.visible = name in figures
         if result.report is None:
             return
-        src = self.analysis_sources
-        if "network" in figures:
-            for name, columns in analysis.network_segments(result).items():
-                src[name].data = columns
-        if "forces" in figures:
-            for name, columns in analysis.force_scatter(result).items():
-                src["forces" if name == "points" else "lines"].data = columns
-        if "structure" in figures:
-            for name, columns in analysis.structure_curve(result).items():
-                src[name].data = columns
         self.scene.show_arrows(analysis.mechanism_arrows(result) if "mechanism" in figures else np.zeros((0, 2, 2)),
                                float(result.state.radii.mean()))
 

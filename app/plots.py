@@ -23,6 +23,7 @@ from bokeh.plotting import figure
 
 from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
+from . import analysis
 from .drawing import STATUS_LEGEND, WATCHED_COLORS, hex_color
 
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
@@ -57,9 +58,10 @@ def compact(value: float) -> str:
 
 
 def lab_figure(name: str, title: str, x_label: str, y_label: str, **kwargs):
-    """A figure that fills its place, with compact tick labels and the lab's tools."""
-    fig = figure(name=f"figure-{name}", title=title, tools=TOOLS, sizing_mode="stretch_both", min_height=200,
-                 x_axis_label=x_label, y_axis_label=y_label, **kwargs)
+    """A figure that fills its place (unless ``kwargs`` size it), with compact tick labels and the lab's tools."""
+    kwargs = {"sizing_mode": "stretch_both", "min_height": 200, **kwargs}
+    fig = figure(name=f"figure-{name}", title=title, tools=TOOLS, x_axis_label=x_label, y_axis_label=y_label,
+                 **kwargs)
     fig.toolbar.logo = None
     fig.toolbar.autohide = True
     fig.title.text_font_size = "14px"
@@ -432,4 +434,59 @@ LINES = {
 }
 """The plots that are lines of one series: title, series, axis labels (x: the preset's time
 label unless given) and lines (x column, y column, legend label, colour)."""
+
+
+class AnalysisFigures:
+    """The figures of an analysis (:data:`engine.analysis.report.FIGURES` that a plot draws):
+    ``network`` the contacts by the status minimum sliding gives, ``forces`` the (N, T) scatter,
+    ``structure`` I(k) and its fit; each fed by its own sources (the lab's Analysis tab and a
+    notebook draw the same)."""
+
+    def __init__(self):
+        self.sources = {name: ColumnDataSource(columns, name=f"analysis-{name}") for name, columns in (
+            ("segments", {"x0": [], "y0": [], "x1": [], "y1": [], "color": []}),
+            ("critical", {"x": [], "y": [], "color": []}), ("forces", {"normal": [], "tangential": []}),
+            ("lines", {"xs": [], "ys": []}), ("data", {"k": [], "intensity": []}), ("fit", {"k": [], "fitted": []}))}
+        src = self.sources
+        network = lab_figure("analysis-network", "Contacts by the status minimum sliding gives", "x", "y",
+                             match_aspect=True, aspect_scale=1.0)
+        network.segment("x0", "y0", "x1", "y1", color="color", source=src["segments"], line_width=1.5)
+        network.scatter("x", "y", color="color", source=src["critical"], size=8, marker="diamond")
+        for color, text, glyph in (("#1f77b4", "non-sliding", "line"), ("#d62728", "sliding", "line"),
+                                   ("#ff7f0e", "critical, as the dynamics has it", "diamond"),
+                                   ("#d62728", "critical, the dynamics disagrees", "diamond")):
+            nowhere = np.array([np.nan])
+            if glyph == "line":
+                network.line(nowhere, nowhere, color=color, line_width=2, legend_label=text)
+            else:
+                network.scatter(nowhere, nowhere, color=color, marker="diamond", size=8, legend_label=text)
+        legend_above(network, columns=2)
+        forces = lab_figure("analysis-forces", "Interaction forces (N, T) (Gilabert Fig. 14)", "N (paper units)",
+                            "T (paper units)")
+        forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5, legend_label="an interaction")
+        forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed",
+                          legend_label="T = ±√3 N")
+        legend_above(forces)
+        structure = lab_figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k (1/length)",
+                               "I(k) (Eq. 25)", x_axis_type="log", y_axis_type="log")
+        structure.scatter("k", "intensity", source=src["data"], size=4, legend_label="I(k) of the state")
+        structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2, legend_label="fit of Eq. 28")
+        legend_above(structure)
+        self.figures = {"network": network, "forces": forces, "structure": structure}
+
+    def show(self, result) -> tuple[str, ...]:
+        """Feed the figures from ``result`` (an :class:`app.analysis.AnalysisResult`); the names of
+        the figures its report has (:data:`engine.analysis.report.FIGURES`)."""
+        figures = tuple(result.report.figures) if result.report is not None else ()
+        src = self.sources
+        if "network" in figures:
+            for name, columns in analysis.network_segments(result).items():
+                src[name].data = columns
+        if "forces" in figures:
+            for name, columns in analysis.force_scatter(result).items():
+                src["forces" if name == "points" else "lines"].data = columns
+        if "structure" in figures:
+            for name, columns in analysis.structure_curve(result).items():
+                src[name].data = columns
+        return figures
 

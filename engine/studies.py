@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.ratchet import deviatoric_strain, ratchet_verdict
+from .analysis.ratchet import RatchetVerdict, deviatoric_strain, ratchet_verdict
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output
@@ -101,6 +101,54 @@ def sample_file(out_dir: str, model: str, seed: int) -> Path:
     return Path(out_dir) / f"ratchet_{model}_seed{seed}.h5"
 
 
+@dataclass(frozen=True)
+class RatchetCurve:
+    """One sample cycled with one tangential model: ``cycles`` and the box lengths at the start of
+    each, ``gamma`` the deviatoric strain from the reference cycle on (ratcheting Eq. 32) and the
+    paper's ``verdict`` on it."""
+
+    model: str
+    cycles: np.ndarray
+    length_x: np.ndarray
+    length_y: np.ndarray
+    reference_cycle: int
+    gamma: np.ndarray
+    verdict: RatchetVerdict
+
+
+def model_sim(base, study: RatchetStudy, model: str):
+    """A copy of the prepared biaxial box ``base`` with tangential ``model``, the time step and the
+    gravity of ``study``, ready to cycle."""
+    sim = base.clone(tangential_model=model)
+    sim.set_dt(study.dt_factor * math.sqrt(float(sim.particles.mass.min()) / sim.law.normal_stiffness))
+    if study.gravity:
+        sim.set_gravity(0.0, -study.gravity)
+    return sim
+
+
+def cycle_sample(sim, study: RatchetStudy, writer: RunWriter | None = None) -> RatchetCurve:
+    """Cycle ``sim`` (from :func:`model_sim`) as ``study`` says (load, cycles; ratcheting Sec. IV B);
+    with ``writer``, every cycle's record, a frame every ``frame_every`` cycles and the watched
+    contacts go into its run file."""
+    load = CyclicLoad(pressure=1.0, amplitude=study.amplitude, period=study.period, phase=study.phase)
+
+    def on_cycle(cycle, s, lx, ly):
+        if writer is not None:
+            writer.write_cycle(cycle, s, lx, ly)
+            if cycle % study.frame_every == 0 or cycle in (study.reference_cycle, study.cycles):
+                writer.write_frame(s)
+
+    series = run_cycles(sim, load, study.cycles, on_cycle=on_cycle,
+                        samples_per_cycle=study.watch_samples if writer is not None else 0,
+                        on_sample=writer.write_contact_sample if writer is not None else None)
+    if writer is not None:
+        writer.write_checkpoint(sim)
+    cycles, lx, ly = series.arrays()
+    ref = study.reference_cycle
+    gamma = deviatoric_strain(lx[ref:], ly[ref:], lx[ref], ly[ref])
+    return RatchetCurve(sim.law.tangential_model, cycles, lx, ly, ref, gamma, ratchet_verdict(cycles[ref:], gamma))
+
+
 def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrite: bool = False) -> list[dict]:
     """Prepare sample ``seed``, cycle it with each model; one result (or error) per model."""
     results = []
@@ -113,11 +161,7 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
     for model in study.models:
         start = time.perf_counter()
         try:
-            sim = base.clone(tangential_model=model)
-            sim.set_dt(study.dt_factor * math.sqrt(float(sim.particles.mass.min()) / sim.law.normal_stiffness))
-            if study.gravity:
-                sim.set_gravity(0.0, -study.gravity)
-            load = CyclicLoad(pressure=1.0, amplitude=study.amplitude, period=study.period, phase=study.phase)
+            sim = model_sim(base, study, model)
             run_file = None
             writer = None
             if out_dir is not None:
@@ -126,23 +170,11 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
                 writer = RunWriter(run_file, sim, watch=watch, overwrite=overwrite,
                                    protocol={"study": "ratchet", "seed": seed, "model": model, **study.__dict__})
             try:
-                def on_cycle(cycle, s, lx, ly):
-                    if writer is not None:
-                        writer.write_cycle(cycle, s, lx, ly)
-                        if cycle % study.frame_every == 0 or cycle in (study.reference_cycle, study.cycles):
-                            writer.write_frame(s)
-                series = run_cycles(sim, load, study.cycles, on_cycle=on_cycle,
-                                    samples_per_cycle=study.watch_samples if writer is not None else 0,
-                                    on_sample=writer.write_contact_sample if writer is not None else None)
-                if writer is not None:
-                    writer.write_checkpoint(sim)
+                curve = cycle_sample(sim, study, writer)
             finally:
                 if writer is not None:
                     writer.close()
-            cycles, lx, ly = series.arrays()
-            ref = study.reference_cycle
-            gamma = deviatoric_strain(lx[ref:], ly[ref:], lx[ref], ly[ref])
-            verdict = ratchet_verdict(cycles[ref:], gamma)
+            verdict = curve.verdict
             results.append({"seed": seed, "model": model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
                             "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,
                             "outlier_cycles": verdict.outlier_cycles, "equilibrated": prepared.equilibrated,
