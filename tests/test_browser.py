@@ -448,3 +448,40 @@ def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, sm
     after = churn(20)
     assert status(lab)["history_mib"] <= 1.0
     assert after - before < 10.0, f"20 tabs took the server from {before:.1f} to {after:.1f} MiB"
+
+
+def test_the_lab_of_a_notebook_cell_runs_in_its_frame(page, tmp_path):
+    """``gl.lab`` in a notebook: the cell's HTML, in a page served from another origin (as
+    Jupyter's is), opens the lab in its frame: the preset starts for that tab and its plots fill in."""
+    import functools
+    import http.server
+    import threading
+
+    from app.notebook import NotebookLab
+
+    live = NotebookLab("ratchet16", data_dir=tmp_path / "data")
+    (tmp_path / "cell.html").write_text(f"<html><body><h3>In [1]: live</h3>{live._repr_html_()}</body></html>")
+    notebook = http.server.ThreadingHTTPServer(
+        ("127.0.0.1", 0), functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(tmp_path)))
+    threading.Thread(target=notebook.serve_forever, daemon=True).start()
+    origin = f"http://127.0.0.1:{notebook.server_address[1]}/"
+    try:
+        assert live.status()["state"] == "waiting"
+        # the 3D scene's own requests are refused, as in open_dashboard: software WebGL slows the tab
+        page.route("**/*", lambda route: route.continue_() if route.request.url.startswith((origin, live.url))
+                   else route.abort())
+        page.goto(origin + "cell.html")
+        frame = page.frame_locator("iframe")
+        expect(frame.locator(".preset-select select")).to_be_visible(timeout=60000)
+        state = wait_status(live, lambda s: s["state"] == "running" and s["tabs"] == 1 and s["time"] > 0,
+                            timeout=60, read=lambda lab: lab.status())
+        assert state["preset"] == "ratchet16"
+        inner = next(f for f in page.frames if f.url.startswith(live.url))
+        inner.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0 && Bokeh.documents[0]"
+                                ".get_model_by_name('coulomb-cone-paths') !== null && Bokeh.documents[0]"
+                                ".get_model_by_name('coulomb-cone-paths').data.x0.length > 10", polling=200,
+                                timeout=60000)
+    finally:
+        notebook.shutdown()
+        live.stop()
+    assert not live._thread.is_alive()
