@@ -59,8 +59,7 @@ class _Frame:
     def __init__(self, raw: dict, normals: np.ndarray, kind: np.ndarray):
         self.raw = raw
         self.kind = kind
-        self.data = FrameData.from_run_frame(raw, normals)
-        self.scene = build_frame([(self.data, (0.0, 0.0))])
+        self.scene = build_frame([(FrameData.from_run_frame(raw, normals), (0.0, 0.0))])
         self.periodic = tuple(b == "periodic" for b in raw["boundary"])
         self.lengths = np.asarray(raw["edges"], dtype=float)
         self.lower = _lower_corner(raw, normals, self.periodic)
