@@ -153,6 +153,20 @@ def test_springs_of_opening_contacts_are_tallied():
     assert abs(error) < 3e-3
 
 
+def test_gravity_energy_counts_every_disk_that_moves_and_none_that_is_fixed():
+    """A disk that never turns (inertia inf) falls as the others do: its potential energy m g h is
+    booked (it was left out with the spin's terms), and a fixed disk has none."""
+    particles = ParticleState([[0.0, 10.0], [5.0, 10.0], [10.0, 0.0]], [0.5, 0.5, 0.5], mass=[1.0, 2.0, 3.0],
+                              inertia=[np.inf, 0.25, 0.375], kind=["dynamic", "dynamic", "fixed"])
+    sim = Simulation(particles, ContactLaw(), Integration(dt=1e-3), gravity=(0.0, -1.0))
+    start = sim.energy()
+    assert start.gravity == pytest.approx(-(1.0 * -1.0 * 10.0 + 2.0 * -1.0 * 10.0))
+    sim.run(2000)
+    end = sim.energy()
+    assert end.kinetic == pytest.approx(0.5 * 3.0 * 2.0 ** 2, rel=1e-9)  # both fell for t = 2
+    assert end.balance == pytest.approx(start.balance, abs=1e-9)
+
+
 def _oblique_collision(dt_safety, friction=10.0, damping_ratio=0.0):
     """Two disks, one at rest, struck off-centre at speed 1: the contact sticks, then lets its
     tangential spring go by sliding as F_n falls, and opens."""

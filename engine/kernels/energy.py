@@ -30,9 +30,9 @@ def energy_terms(p, w, ct, law, normal_model, gravity, out):
         if p.inv_mass[i] > 0.0:
             m = p.mass[i]
             out[KINETIC_TRANSLATION] += 0.5 * m * (p.velocity[i, 0] ** 2 + p.velocity[i, 1] ** 2)
+            out[GRAVITY] -= m * (gravity[0] * p.position[i, 0] + gravity[1] * p.position[i, 1])
         if p.inv_inertia[i] > 0.0:
             out[KINETIC_ROTATION] += 0.5 * p.omega[i] ** 2 / p.inv_inertia[i]
-            out[GRAVITY] -= m * (gravity[0] * p.position[i, 0] + gravity[1] * p.position[i, 1])
     for k in range(ct.count[0]):
         if ct.status[k] == STATUS_NONE:
             continue
