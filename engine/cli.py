@@ -32,6 +32,7 @@ import numba
 from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError
 from .io.jsonsafe import jsonable
+from .params import TANGENTIAL_MODELS
 from .reproduce import REPRODUCTIONS
 
 
@@ -255,7 +256,6 @@ def _print_prepare(result: dict) -> None:
 
 
 def _study(args) -> dict:
-    from .params import TANGENTIAL_MODELS
     from .studies import RatchetStudy, run_ratchet_study, text_progress
 
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
@@ -419,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")
     experiment.add_argument("name", choices=("collision", "closed-path", "block"))
-    experiment.add_argument("--model", default="cundall-strack", choices=("cundall-strack", "alpha", "angle"),
+    experiment.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS,
                             help="tangential spring model")
     experiment.add_argument("--zeta", type=_float, help="normal damping ratio zeta in [0, 1)")
     experiment.add_argument("--mu", type=_float, help="friction coefficient (inf: no sliding)")
@@ -465,7 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--particles", type=_positive_int, default=16)
     ratchet.add_argument("--samples", type=_positive_int, default=10)
     ratchet.add_argument("--cycles", type=_positive_int, default=100)
-    ratchet.add_argument("--model", default="cundall-strack", choices=("cundall-strack", "alpha", "angle", "all"))
+    ratchet.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS + ("all",))
     ratchet.add_argument("--phase", type=_float, help="elliptic loading with this phase (degrees; Eqs. 4-5)")
     ratchet.add_argument("--mu", type=_float, default=0.2, help="friction during cycling (inf: no sliding)")
     ratchet.add_argument("--dt-factor", type=_float, default=0.2, help="dt = f sqrt(m_min / K_n) (default 0.2)")

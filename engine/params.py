@@ -17,7 +17,27 @@ from dataclasses import dataclass
 
 from .errors import ParameterError
 
-TANGENTIAL_MODELS = ("cundall-strack", "alpha", "angle")
+@dataclass(frozen=True)
+class TangentialModel:
+    """A tangential spring model: its ``name`` (what scenes, the command line and the lab take),
+    the ``code`` the kernels switch on, its ``title`` in words, whether its tangential force and
+    spring rate carry ``alpha = (r_i + r_j) / |x_i - x_j|`` (ratcheting Eqs. 23-25, 30; the angle
+    spring's force does too), and whether a closed path leaves it the residue a / (r_i + r_j) of
+    ratcheting Eq. 17 (``path_dependent``)."""
+
+    name: str
+    code: int
+    title: str
+    alpha_factor: bool
+    path_dependent: bool
+
+
+TANGENTIAL = {model.name: model for model in (
+    TangentialModel("cundall-strack", 0, "Cundall–Strack (ratcheting Eqs. 7–11)", False, True),
+    TangentialModel("alpha", 1, "α-corrected integration (ratcheting Eqs. 23–25, 30)", True, False),
+    TangentialModel("angle", 2, "angle-based spring (ratcheting Eqs. 18–22)", True, False))}
+"""The one registry of tangential models, by name; every other list of them is made from it."""
+TANGENTIAL_MODELS = tuple(TANGENTIAL)
 NORMAL_MODELS = ("linear", "area")
 WALL_MODES = ("fixed", "velocity", "force")
 CELL_CONTROLS = ("fixed", "stress", "strain-rate")

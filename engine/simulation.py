@@ -23,14 +23,13 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
                              ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, elastic_normal_forces, energy_terms,
                              rolling_distance)
 from .kernels.contacts import TALLY_SIZE
-from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR,
-                           TANGENTIAL_ALPHA, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, ZETA_R)
-from .params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
+from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR, ZETA,
+                           ZETA_R)
+from .params import TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
 from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
                     ParticleState, WallState, Workspace)
 
 NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
-TANGENTIAL_CODES = {"cundall-strack": TANGENTIAL_CS, "alpha": TANGENTIAL_ALPHA, "angle": TANGENTIAL_ANGLE}
 
 #: largest number of contacts per disk assumed by the time-step bound (2D, equal disks)
 Z_MAX = 6
@@ -359,7 +358,7 @@ class Simulation:
 
     @property
     def tangential_model_code(self) -> int:
-        return TANGENTIAL_CODES[self.law.tangential_model]
+        return TANGENTIAL[self.law.tangential_model].code
 
     def threads(self) -> int:
         """Threads a run uses: numba's thread count of the calling thread (``numba.set_num_threads``),

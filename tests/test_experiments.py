@@ -55,3 +55,26 @@ def test_closed_path_result_reports_the_paper_quantities():
     for key in ("delta_Dt", "predicted_delta_Dt", "enclosed_area"):
         assert isinstance(result[key], float)
     assert result["enclosed_area"] > 0
+
+
+def test_one_registry_names_the_tangential_models_for_the_kernels_the_command_line_and_the_experiments():
+    """engine.params.TANGENTIAL is the only list of the models: the kernels' codes, the choices of
+    the command line and the lab, and the closed path's prediction (Eq. 17's residue only for a
+    path-dependent spring) come from it."""
+    from engine.cli import build_parser
+    from engine.kernels import laws
+    from engine.params import TANGENTIAL, TANGENTIAL_MODELS
+    from engine.protocols.presets import LabSettings
+
+    codes = [model.code for model in TANGENTIAL.values()]
+    assert TANGENTIAL_MODELS == tuple(TANGENTIAL) and len(set(codes)) == len(codes)
+    assert (laws.TANGENTIAL_CS, laws.TANGENTIAL_ALPHA, laws.TANGENTIAL_ANGLE) == tuple(codes)
+    commands = next(a for a in build_parser()._actions if a.dest == "command").choices
+    experiment = next(a for a in commands["experiment"]._actions if a.dest == "model")
+    study = next(a for a in next(a for a in commands["study"]._actions if a.dest == "kind").choices["ratchet"]._actions
+                 if a.dest == "model")
+    assert tuple(experiment.choices) == TANGENTIAL_MODELS and tuple(study.choices) == TANGENTIAL_MODELS + ("all",)
+    for name, model in TANGENTIAL.items():
+        assert LabSettings(tangential_model=name).tangential_model == name
+        predicted = teaching.closed_path(model=name).predicted_delta_Dt
+        assert (predicted != 0.0) == model.path_dependent

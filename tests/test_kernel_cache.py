@@ -8,7 +8,8 @@ def test_a_kernel_is_cached_under_the_stamp_of_every_kernel_source():
     locator = integrate.advance._cache._impl.locator
     assert type(locator).__name__.startswith("Kernels")
     assert locator.get_source_stamp() == jit.sources_stamp(jit.SOURCES)
-    assert {"contacts.py", "laws.py", "integrate.py", "neighbours.py", "state.py"} <= {p.name for p in jit.SOURCES}
+    assert {"contacts.py", "laws.py", "integrate.py", "neighbours.py", "state.py", "params.py"} <= \
+        {p.name for p in jit.SOURCES}
 
 
 def test_the_stamp_changes_with_the_content_of_any_source(tmp_path):

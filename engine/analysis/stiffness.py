@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .. import params
 from ..errors import ParameterError
 from ..state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
@@ -133,7 +134,8 @@ def network(snapshot, cell_lengths=None) -> Network:
     normal = np.where(is_wall[:, None], snapshot.wall_normals[np.maximum(wall, 0)] if len(snapshot.wall_normals)
                       else 0.0, branch / np.maximum(distance, 1e-300)[:, None])
     ri, rj = snapshot.radii[i], np.where(is_wall, 0.0, snapshot.radii[jj])
-    alpha = np.ones(len(i)) if law.tangential_model == "cundall-strack" else np.where(is_wall, 1.0, (ri + rj) / np.maximum(distance, 1e-300))
+    alpha = np.where(is_wall, 1.0, (ri + rj) / np.maximum(distance, 1e-300)) \
+        if params.TANGENTIAL[law.tangential_model].alpha_factor else np.ones(len(i))
     gap = c.surface_gap[keep]
     status = c.status[keep]
     distant = status == STATUS_COHESIVE

@@ -9,9 +9,10 @@ launched from several Python threads at once.
 Numba judges a cached kernel fresh when its own source file is unchanged, but a
 kernel carries compiled copies of the functions it calls from other files (the
 step kernel of ``integrate.py`` holds the contact loop and the laws). A kernel
-of this package is therefore cached under a stamp of all of its sources and of
-``engine/state.py`` (whose constants are compiled in): changing the contact law
-recompiles every kernel that calls it.
+of this package is therefore cached under a stamp of all of its sources, of
+``engine/state.py`` and of ``engine/params.py`` (whose constants, the status and
+tangential model codes, are compiled in): changing the contact law recompiles
+every kernel that calls it.
 """
 
 import functools
@@ -32,7 +33,7 @@ PARALLEL = dict(JIT, parallel=True)
 KERNEL = dict(JIT, _nrt=False)
 
 KERNELS = Path(__file__).resolve().parent
-SOURCES = tuple(sorted(KERNELS.glob("*.py"))) + (KERNELS.parent / "state.py",)
+SOURCES = tuple(sorted(KERNELS.glob("*.py"))) + (KERNELS.parent / "state.py", KERNELS.parent / "params.py")
 
 
 def sources_stamp(paths) -> str:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParameterError
-from ..params import ContactLaw, Integration, Wall, nonnegative, positive
+from ..params import TANGENTIAL, ContactLaw, Integration, Wall, nonnegative, positive
 from ..simulation import Simulation
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, ParticleState
 
@@ -161,7 +161,7 @@ def closed_path(model: str = "cundall-strack", mu: float = math.inf, dt: float |
     final_error = float(np.hypot(*(sim.particles.position[0] - [0.0, d_a])))
     # signed area of the closed path (shoelace on the polar path), counter-clockwise positive
     area = 0.5 * turn * (d_b ** 2 - d_a ** 2)
-    predicted = area / (2.0 * radius) if model == "cundall-strack" else 0.0
+    predicted = area / (2.0 * radius) if TANGENTIAL[model].path_dependent else 0.0
     return ClosedPathResult(model=model, delta_Dt=spring() - start, predicted_delta_Dt=predicted,
                             enclosed_area=abs(area), final_position_error=final_error, max_abs_Dt=max_dt,
                             slid=bool(slid), path=np.array(path))
