@@ -30,7 +30,7 @@ from numba import njit, prange, uint64
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL, PARALLEL
 from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, ZETA_R,
-                   coulomb, normal_elastic, rolling, wrap_angle)
+                   cohesion_force, coulomb, disk_arc, normal_elastic, rolling, wall_arc)
 
 # per-chunk scalar tallies
 TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
@@ -214,7 +214,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 max_overlap = max(max_overlap, overlap / limit_radius)
             ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
             eta = eta_factor * root_reduced_mass[k]
-            fn = ne - eta * vn - f0
+            fn = ne - eta * vn + cohesion_force(f0, d0, gap)
             damping += eta * vn * vn * dt
             fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
             if fresh:
@@ -232,12 +232,12 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 rate = alpha * vt - spin_sum
             if tangential_model == TANGENTIAL_ANGLE:
                 phi = math.atan2(ny, nx)
-                trial = ri * wrap_angle(phi + math.pi - angle[i] - anchor_i[k])
+                trial = disk_arc(ri, phi + math.pi, angle[i], anchor_i[k])
                 if is_wall:
-                    trial += (tx * position[i, 0] + ty * position[i, 1]
-                              - wall_tangential_position[j - n] - anchor_j[k])
+                    trial += wall_arc(tx, ty, position[i, 0], position[i, 1], wall_tangential_position[j - n],
+                                      anchor_j[k])
                 else:
-                    trial += rj * wrap_angle(phi - angle[j] - anchor_j[k])
+                    trial += disk_arc(rj, phi, angle[j], anchor_j[k])
             elif fresh:
                 trial = 0.0
             else:
@@ -269,7 +269,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         elif f0 > 0.0:
             opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
                               kt, kr)
-            fn = -f0 * (1.0 - gap / d0)
+            fn = cohesion_force(f0, d0, gap)
             status[k] = STATUS_COHESIVE
         else:
             opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,

@@ -6,7 +6,8 @@ from numba import njit
 
 from ..state import STATUS_NONE, WALL_FORCE
 from .jit import JIT
-from .laws import D0, F0, KN, KR, KT, cohesion_potential, normal_elastic, normal_potential, wrap_angle
+from .laws import (D0, F0, KN, KR, KT, cohesion_potential, disk_arc, normal_elastic, normal_potential,
+                   wall_arc)
 
 (KINETIC_TRANSLATION, KINETIC_ROTATION, NORMAL_ELASTIC, COHESION, TANGENTIAL_ELASTIC, ROLLING_ELASTIC,
  GRAVITY, WALL_KINETIC) = range(8)
@@ -70,14 +71,15 @@ def rolling_distance(p, w, cell, ct, out):
             rx = p.position[i, 0] - p.position[j, 0] - ct.image[k, 0] * cell.length[0]
             ry = p.position[i, 1] - p.position[j, 1] - ct.image[k, 1] * cell.length[1]
             phi = math.atan2(ry, rx)
-            s_j = p.radius[j] * wrap_angle(phi - p.angle[j] - ct.anchor_angle_j[k])
+            s_j = disk_arc(p.radius[j], phi, p.angle[j], ct.anchor_angle_j[k])
         else:
             wall = j - n
             nx = w.normal[wall, 0]
             ny = w.normal[wall, 1]
             phi = math.atan2(ny, nx)
-            s_j = -ny * p.position[i, 0] + nx * p.position[i, 1] - w.tangential_position[wall] - ct.anchor_angle_j[k]
-        s_i = ri * wrap_angle(phi + math.pi - p.angle[i] - ct.anchor_angle_i[k])
+            s_j = wall_arc(-ny, nx, p.position[i, 0], p.position[i, 1], w.tangential_position[wall],
+                           ct.anchor_angle_j[k])
+        s_i = disk_arc(ri, phi + math.pi, p.angle[i], ct.anchor_angle_i[k])
         out[k] = 0.5 * (s_i - s_j)
 
 

@@ -40,6 +40,21 @@ def wrap_angle(x):
 
 
 @njit(**KERNEL)
+def disk_arc(radius, phi, angle, anchor):
+    """Signed arc ``r wrap(phi - theta - a)`` on a disk of angle ``theta`` from the material point
+    of first contact (at ``a`` in the disk's frame) to the contact point in direction ``phi``
+    (ratcheting Eqs. 18-20; the first disk of a pair sees its contact in direction ``phi + pi``)."""
+    return radius * wrap_angle(phi - angle - anchor)
+
+
+@njit(**KERNEL)
+def wall_arc(tx, ty, x, y, wall_shift, anchor):
+    """Distance along a wall (tangent ``(tx, ty)``, slid by ``wall_shift``) from the point of first
+    contact ``anchor`` to the foot of a disk at ``(x, y)``: a wall's :func:`disk_arc`."""
+    return tx * x + ty * y - wall_shift - anchor
+
+
+@njit(**KERNEL)
 def _x_minus_sin_x(x):
     if abs(x) < 0.2:
         x2 = x * x
