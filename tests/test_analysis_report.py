@@ -13,7 +13,7 @@ import numpy as np
 from engine import cli
 from engine.analysis import ANALYSES
 from engine.analysis import report as rp
-from engine.analysis import stiffness as st
+from engine.analysis import status as ss
 from engine.analysis.report import MISSING, AnalysisReport, analyze
 from engine.analysis.states import PackingState, read_state
 from engine.generate import radii as make_radii, random_gas
@@ -172,7 +172,7 @@ def test_states_of_the_critical_contacts_in_words():
 
 
 def test_a_skipped_enumeration_and_unclassified_modes_say_why(monkeypatch):
-    monkeypatch.setattr(st, "MAX_ENUMERATED", 2)
+    monkeypatch.setattr(ss, "MAX_ENUMERATED", 2)
     monkeypatch.setattr(rp, "MODE_VECTORS", 1)
     monkeypatch.setattr(rp, "RIGIDITY_MODE_VECTORS", 1)
     status = rows_of(analyze(sliding_packing(), "status"))

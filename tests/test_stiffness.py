@@ -117,18 +117,19 @@ def test_the_sparse_solve_and_mechanisms_agree_with_the_dense_ones(monkeypatch):
     symmetric ordering) and ARPACK: forced onto that path, the 16-disk box with 19 of its 37
     contacts sliding (k not symmetric) gives the dense answers, and so does the enumeration of the
     2^5 states of five of its critical contacts."""
+    from engine.analysis import status as ss
     from engine.analysis import stiffness as st
 
     net = turned_box(3, 1)
     load = deviatoric_load(net)
     dense_v = st.response(net, load)
     dense = st.mechanisms(net, load)
-    critical = st.critical_contacts(net)[:5]
-    states = st.enumerate_states(net, load, critical)
+    critical = ss.critical_contacts(net)[:5]
+    states = ss.enumerate_states(net, load, critical)
     monkeypatch.setattr(st, "DENSE_SIZE", 0)
     np.testing.assert_allclose(st.response(net, load), dense_v, rtol=1e-8, atol=1e-12 * np.abs(dense_v).max())
     assert st.mechanisms(net, load).as_dict() == dense.as_dict()
-    assert st.enumerate_states(net, load, critical).as_dict() == states.as_dict()
+    assert ss.enumerate_states(net, load, critical).as_dict() == states.as_dict()
     assert len(states.unstable_states) > 0 and states.states_checked == 32  # a case with something to agree on
 
 
@@ -204,7 +205,7 @@ def test_exactly_one_contact_state_is_consistent(seed):
     """Quasi-rigidity Sec. II D on small packings: every state is stable here (checked), so the
     consistency map C must be a bijection of {0,1}^M_c and exactly one state obey the principle of
     minimum sliding; the iterative solver and the dynamics find that state."""
-    from engine.analysis.stiffness import critical_contacts, enumerate_states, solve_status
+    from engine.analysis.status import critical_contacts, enumerate_states, solve_status
 
     net = turned_box(1, seed)
     critical = critical_contacts(net)

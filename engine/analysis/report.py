@@ -44,6 +44,7 @@ import numpy as np
 
 from ..errors import GranLabError, ParameterError
 from . import ANALYSES, LOADS
+from . import status
 from . import stiffness as st
 from .packing import packing_stats
 from .states import require_forces
@@ -324,24 +325,24 @@ def _status(state, clock, load, seed) -> AnalysisReport:
     require_forces(state, "the contact-status analysis")
     net = _network(state)
     increment, kind = load_increment(net, load, seed)
-    critical = st.critical_contacts(net)
+    critical = status.critical_contacts(net)
     clock.lap("critical_contacts")
-    solution = st.solve_status(net, increment, critical)
+    solution = status.solve_status(net, increment, critical)
     clock.lap("minimum_sliding")
     values = {"contacts": net.contacts, "load": kind, "critical_contacts": int(len(critical)),
               "iterations": solution.iterations, "agrees_with_dynamics": solution.agrees_with_dynamics,
               "dynamics_sliding": int(np.count_nonzero(net.sliding[critical])),
               "solver_sliding": int(np.count_nonzero(solution.sliding[critical])),
               "states_checked": None, "consistent_states": None, "unstable_states": None, "bijective": None}
-    limit = st.MAX_ENUMERATED if net.dof <= st.DENSE_SIZE else st.MAX_ENUMERATED_SPARSE
+    limit = status.MAX_ENUMERATED if net.dof <= st.DENSE_SIZE else status.MAX_ENUMERATED_SPARSE
     reasons = {}
     if len(critical) <= limit:
-        enumeration = st.enumerate_states(net, increment, critical)
+        enumeration = status.enumerate_states(net, increment, critical)
         clock.lap("enumeration")
         values.update(enumeration.as_dict())
     else:
         values["enumeration_skipped"] = (f"{len(critical)} critical contacts: all states are enumerated for at "
-                                         f"most {st.MAX_ENUMERATED} ({st.MAX_ENUMERATED_SPARSE} above "
+                                         f"most {status.MAX_ENUMERATED} ({status.MAX_ENUMERATED_SPARSE} above "
                                          f"{st.DENSE_SIZE} velocity components)")
         reasons = dict.fromkeys(("states_checked", "consistent_states", "unstable_states", "bijective"),
                                 "not enumerated: too many critical contacts")

@@ -84,7 +84,7 @@ extended XYZ."""
 
 SLIDING_TOLERANCE = 1e-6
 """A contact read from another code slides when |F_t| >= (1 - this) mu F_n (the same tolerance as
-:func:`engine.analysis.stiffness.critical_contacts`)."""
+:func:`engine.analysis.status.critical_contacts`)."""
 
 CONTACT_NAMES = {"id1": ("id1", "patom1"), "id2": ("id2", "patom2"), "fx": ("fx", "fnx"), "fy": ("fy", "fny"),
                  "ftx": ("ftx",), "fty": ("fty",)}
