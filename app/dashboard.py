@@ -24,7 +24,8 @@ import panel as pn
 
 from engine.analysis.report import ANALYSES
 from engine.params import TANGENTIAL_MODELS
-from engine.protocols.presets import CONTROL_LABELS, PRESETS
+from engine.protocols.presets import PRESETS
+from engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis
 from .buffers import Cursor

@@ -40,8 +40,9 @@ from engine.io import h5md
 from engine.io.jsonsafe import jsonable
 from engine.io.outputs import free_name, occupied
 from engine.params import positive
-from engine.protocols.presets import (CONTROL_LABELS, PRESETS, RESET_CONTROLS, LabSettings, Preset, make_preset,
-                                      pair_label, preset_settings, strain_fit)
+from engine.protocols.measures import pair_label
+from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings, strain_fit
+from engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer

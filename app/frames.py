@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 from engine.kernels.jit import KERNEL
-from engine.protocols.presets import pair_codes
+from engine.protocols.measures import pair_codes
 from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 from .drawing import SceneFrame

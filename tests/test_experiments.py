@@ -64,7 +64,7 @@ def test_one_registry_names_the_tangential_models_for_the_kernels_the_command_li
     from engine.cli import build_parser
     from engine.kernels import laws
     from engine.params import TANGENTIAL, TANGENTIAL_MODELS
-    from engine.protocols.presets import LabSettings
+    from engine.protocols.settings import LabSettings
 
     codes = [model.code for model in TANGENTIAL.values()]
     assert TANGENTIAL_MODELS == tuple(TANGENTIAL) and len(set(codes)) == len(codes)

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from engine import ParameterError
-from engine.protocols.presets import PRESETS, LabSettings, PairMaximum, make_preset, mobilisation, preset_settings
+from engine.protocols.measures import PairMaximum, mobilisation
+from engine.protocols.presets import PRESETS, make_preset, preset_settings
+from engine.protocols.settings import LabSettings
 from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 

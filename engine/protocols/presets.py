@@ -26,82 +26,15 @@ import numpy as np
 
 from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
-from ..params import (TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, nonnegative,
-                      positive)
+from ..params import TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
-from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState
+from ..state import ParticleState
 from .cyclic import CyclicLoad, apply_load
 from .equilibrium import equilibrium, measured_pressure
+from .measures import (PairMaximum, contact_rows, coordination, mobilisation, pair_label, sliding_contacts,
+                       solid_fraction)
 from .prepare import biaxial_box, clusters, gilabert_gas, gilabert_law
-
-TOUCHING = (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
-
-CONTROL_LABELS = {
-    "particles": "Disks N", "seed": "Seed", "pressure": "Pressure P0", "amplitude": "Amplitude Δσ",
-    "period": "Period T", "phase": "Loading phase φ", "friction": "Friction μ", "rolling_friction": "Rolling friction μr",
-    "rolling_stiffness": "Rolling stiffness Kr", "cohesion_force": "Cohesion F0", "cohesion_range": "Cohesion range D0",
-    "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
-    "frames_per_cycle": "Frames kept",
-}
-"""The name each control has on the lab's page."""
-
-
-@dataclass(frozen=True)
-class LabSettings:
-    """Every control of the lab, validated. Angles in degrees; ``friction`` may be inf.
-
-    ``particles`` and ``seed`` take effect on reset; the others live. ``speed`` is in clock
-    units of the preset (e.g. load cycles) per second of wall clock; inf runs as fast as possible.
-    """
-
-    particles: int = 256
-    seed: int = 0
-    pressure: float = 1.0
-    amplitude: float = 0.2
-    period: float = 10.0
-    phase: float = 0.0
-    friction: float = 0.2
-    rolling_friction: float = 0.0
-    rolling_stiffness: float = 0.0
-    cohesion_force: float = 0.0
-    cohesion_range: float = 0.0
-    tangential_model: str = "cundall-strack"
-    damping_ratio: float = 0.3
-    speed: float = 1.0
-    frames_per_cycle: float = 10.0
-
-    def __post_init__(self):
-        if isinstance(self.particles, bool) or not isinstance(self.particles, (int, np.integer)) \
-                or not 1 <= self.particles <= 20000:
-            raise ParameterError("particles", self.particles, "a whole number from 1 to 20000")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ParameterError("seed", self.seed, "a whole number >= 0")
-        positive("pressure", self.pressure)
-        nonnegative("amplitude", self.amplitude)
-        positive("period", self.period)
-        if not -180.0 <= finite("phase", self.phase) <= 180.0:
-            raise ParameterError("phase", self.phase, "an angle from -180 to 180 degrees")
-        positive("speed", self.speed, allow_inf=True)
-        if not 0.0 < finite("frames_per_cycle", self.frames_per_cycle) <= 100.0:
-            raise ParameterError("frames_per_cycle", self.frames_per_cycle,
-                                 "from more than 0 to 100 frames kept per clock unit (a load cycle, a loop, T_0)")
-        ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
-                   rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
-                   cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
-                   damping_ratio=self.damping_ratio)
-
-    def replace(self, **changes) -> "LabSettings":
-        names = {f.name for f in dataclasses.fields(self)}
-        for key, value in changes.items():
-            if key not in names:
-                raise ParameterError(key, value, "one of " + ", ".join(sorted(names)))
-        return dataclasses.replace(self, **changes)
-
-
-LAW_CONTROLS = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "cohesion_range",
-                "tangential_model", "damping_ratio")
-RESET_CONTROLS = ("particles", "seed")
-
+from .settings import LAW_CONTROLS, LabSettings
 
 @dataclass(frozen=True)
 class View:
@@ -360,92 +293,6 @@ def _real(value) -> float:
         else math.nan
 
 
-def pair_label(pair: tuple[int, int], disks: int, wall_names) -> str:
-    """``i–j`` of a watched pair (``i–top`` for a wall)."""
-    i, j = pair
-    return f"{i}–{j}" if j < disks else f"{i}–{wall_names[j - disks]}"
-
-
-def _contact_rows(sim: Simulation, pairs: list[tuple[int, int]]):
-    """(i, j, F_n, F_t, status) of the watched pairs present in ``sim``'s table, with
-    ``F_n = N^e + N^a`` the normal force without its viscous part: ``N^e - F0`` in contact
-    (Gilabert Eq. 4), the attraction alone at a distance. The Coulomb condition
-    ``|F_t| <= mu N^e`` (Gilabert Eq. 8) is then the cone ``|F_t| <= mu (F_n + F0)``."""
-    if not pairs:
-        return []
-    snap = sim.contact_snapshot()
-    cohesion = sim.law.cohesion_force
-    keys = np.array(pairs, dtype=np.int64)
-    out = []
-    for k in np.flatnonzero(np.isin(pair_codes(snap.i, snap.j), pair_codes(keys[:, 0], keys[:, 1]))):
-        touching = snap.status[k] in TOUCHING
-        normal = snap.elastic_normal_force[k] - cohesion if touching else snap.normal_force[k]
-        out.append((int(snap.i[k]), int(snap.j[k]), float(normal), float(snap.tangential_force[k]),
-                    int(snap.status[k])))
-    return out
-
-
-def pair_codes(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """One int64 per pair (i, j) of the contact table (indices below 2^31)."""
-    return (np.asarray(i, dtype=np.int64) << 32) | np.asarray(j, dtype=np.int64)
-
-
-def mobilisation(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs (K, 2) and |F_t| / N^e (K,) of the touching contacts with N^e > 0 (the ratio
-    reaches mu on the Coulomb cone)."""
-    snap = sim.contact_snapshot()
-    touching = np.isin(snap.status, TOUCHING)
-    keep = np.flatnonzero(touching & (snap.elastic_normal_force > 0))
-    ratio = np.abs(snap.tangential_force[keep]) / snap.elastic_normal_force[keep]
-    return np.column_stack([snap.i[keep], snap.j[keep]]), ratio
-
-
-class PairMaximum:
-    """The largest value seen for each pair (i, j), merged in bulk (one sort per merge)."""
-
-    def __init__(self):
-        self.codes = np.zeros(0, dtype=np.int64)
-        self.values = np.zeros(0)
-
-    def add(self, pairs: np.ndarray, values: np.ndarray) -> None:
-        codes = np.concatenate([self.codes, pair_codes(pairs[:, 0], pairs[:, 1])])
-        values = np.concatenate([self.values, values])
-        order = np.lexsort((-values, codes))
-        codes, values = codes[order], values[order]
-        first = np.ones(len(codes), dtype=bool)
-        first[1:] = codes[1:] != codes[:-1]
-        self.codes, self.values = codes[first], values[first]
-
-    def as_dict(self) -> dict[tuple[int, int], float]:
-        return {(int(c >> 32), int(c & 0xFFFFFFFF)): float(v) for c, v in zip(self.codes, self.values)}
-
-    def largest(self, count: int) -> list[tuple[int, int]]:
-        """The ``count`` pairs of largest value, largest first."""
-        top = np.argsort(-self.values, kind="stable")[:count]
-        return [(int(c >> 32), int(c & 0xFFFFFFFF)) for c in self.codes[top]]
-
-
-def coordination(sim: Simulation) -> float:
-    """Mean number of touching disk-disk contacts per disk, 2 M / N."""
-    table = sim.contacts
-    rows = table.count
-    n = sim.particles.count
-    touching = np.isin(table.status[:rows], TOUCHING)
-    return 2.0 * int(np.count_nonzero(touching & (table.particle_j[:rows] < n))) / n
-
-
-def sliding_contacts(sim: Simulation) -> int:
-    """Contacts sliding now (on either side of the Coulomb cone)."""
-    status = sim.contacts.status[:sim.contacts.count]
-    return int(np.count_nonzero((status == STATUS_SLIDE_POS) | (status == STATUS_SLIDE_NEG)))
-
-
-def solid_fraction(sim: Simulation) -> float:
-    """Disk area over the area of the box or cell (:meth:`Simulation.box_lengths`)."""
-    lengths = sim.box_lengths()
-    return math.pi * float(np.sum(sim.particles.radius ** 2)) / float(lengths[0] * lengths[1])
-
-
 # ---------------------------------------------------------------------------------------------- ratchet
 class RatchetPreset(Preset):
     """A biaxial box compressed frictionless to P0, then cyclically loaded (ratcheting Eq. 1).
@@ -621,7 +468,7 @@ class RatchetPreset(Preset):
 
     def sample_paths(self) -> None:
         time = self._sim.time
-        for i, j, normal, tangential, status in _contact_rows(self._sim, self.watch):
+        for i, j, normal, tangential, status in contact_rows(self._sim, self.watch):
             self._emit("contacts", (i, j, time, normal, tangential, status))
 
     def status(self) -> dict:
