@@ -82,6 +82,68 @@ def run(steps: int = TIMED_STEPS, side: int = 100) -> dict:
     }
 
 
+SCALING_SIDES = (32, 100, 316, 1000)
+"""Sides of the lattices of ``bench --scaling``: about 10³, 10⁴, 10⁵ and 10⁶ disks."""
+SCALING_STEPS = 1000
+"""Steps timed at each size: the same simulated time everywhere, so that every size rebuilds its
+table as often (the lattice's thermal motion uses up the skin every few hundred steps)."""
+
+
+def state_bytes(sim: Simulation) -> int:
+    """Bytes of the arrays a simulation steps with: disks, walls, cell, the contact table and its
+    spare, the workspace."""
+    parts = (sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(),
+             sim._spare.arrays(), sim.workspace)
+    return sum(value.nbytes for part in parts for value in part if hasattr(value, "nbytes"))
+
+
+def rebuild_seconds(sim: Simulation, repeats: int = 5) -> float:
+    """Median wall time of one rebuild of the contact table of ``sim`` as it stands (what a step
+    that needs one pays on top of its forces)."""
+    from .kernels import integrate
+
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        integrate.rebuild(sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(),
+                          sim._spare.arrays(), sim.workspace, sim._law_vector, sim.skin)
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def scaling(sides=SCALING_SIDES, steps: int = SCALING_STEPS) -> dict:
+    """The reference system at each of ``sides`` (N = side² disks), on one thread: particle-steps
+    per second, nanoseconds per particle-step, bytes of state per disk, the cost of one rebuild of
+    the contact table in steps (the median of five rebuilds timed apart) and the share of the time
+    spent rebuilding (the rebuilds counted over the timed steps)."""
+    from .kernels.integrate import INFO_REBUILDS
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    rows = []
+    try:
+        for side in sides:
+            sim = reference_system(side)
+            n = sim.particles.count
+            sim.run(WARMUP_STEPS)
+            rebuilds = sim.workspace.info[INFO_REBUILDS]
+            start = time.perf_counter()
+            sim.run(steps)
+            elapsed = time.perf_counter() - start
+            rebuilds = int(sim.workspace.info[INFO_REBUILDS] - rebuilds)
+            one_rebuild = rebuild_seconds(sim)
+            rows.append({"side": side, "particles": n, "steps": steps, "seconds": elapsed,
+                         "particle_steps_per_s": n * steps / elapsed, "ns_per_particle_step": 1e9 * elapsed / (n * steps),
+                         "bytes_per_disk": state_bytes(sim) / n, "rebuilds": rebuilds,
+                         "rebuild_in_steps": one_rebuild / (elapsed / steps),
+                         "rebuild_share": min(1.0, rebuilds * one_rebuild / elapsed)})
+    finally:
+        numba.set_num_threads(previous)
+    best = min(row["ns_per_particle_step"] for row in rows)
+    return {"system": "lammps_reference.in at each size, Cundall-Strack, dt=0.001, 1 thread", "sizes": rows,
+            "worst_over_best": max(row["ns_per_particle_step"] for row in rows) / best}
+
+
 ANALYSIS_PARTICLES = 5600
 
 

@@ -184,12 +184,25 @@ def _bench(args) -> dict:
 
     if args.analysis:
         return bench.analysis(args.analysis, args.particles or bench.ANALYSIS_PARTICLES)
-    if args.steps < 1 or not 2 <= args.side <= 1000:
-        raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {args.steps} and {args.side}")
-    return bench.run(args.steps, args.side)
+    steps = args.steps or (bench.SCALING_STEPS if args.scaling else bench.TIMED_STEPS)
+    if steps < 1 or not 2 <= args.side <= 1000:
+        raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {steps} and {args.side}")
+    if args.scaling:
+        return bench.scaling(steps=steps)
+    return bench.run(steps, args.side)
 
 
 def _print_bench(result: dict) -> None:
+    if "sizes" in result:
+        print(result["system"])
+        print(f"  {'disks':>9} {'steps':>6} {'M particle-steps/s':>19} {'ns/particle-step':>17} {'bytes/disk':>11} "
+              f"{'a rebuild, in steps':>20} {'rebuilds':>9} {'rebuild share':>14}")
+        for row in result["sizes"]:
+            print(f"  {row['particles']:>9} {row['steps']:>6} {row['particle_steps_per_s'] / 1e6:>19.2f} "
+                  f"{row['ns_per_particle_step']:>17.1f} {row['bytes_per_disk']:>11.0f} {row['rebuild_in_steps']:>20.1f} "
+                  f"{row['rebuilds']:>9} {100 * row['rebuild_share']:>13.1f}%")
+        print(f"  slowest size over fastest, per particle-step: {result['worst_over_best']:.2f}")
+        return
     if "fractal_s" in result:
         print(f"analysis of {result['packing']}: {result['particles']} disks, {result['contacts']} contacts"
               + (f" (prepared in {result['preparation_s']:.0f} s)" if result["preparation_s"] else ""))
@@ -428,7 +441,10 @@ def build_parser() -> argparse.ArgumentParser:
     experiment.set_defaults(handler=_experiment, printer=_print_experiment)
 
     bench = commands.add_parser("bench", help="particle-steps per second on the LAMMPS reference system")
-    bench.add_argument("--steps", type=int, default=5000, help="timed steps (default 5000)")
+    bench.add_argument("--steps", type=int, help="timed steps (default 5000; with --scaling 1000 at each size)")
+    bench.add_argument("--scaling", action="store_true",
+                       help="the reference system at 10^3, 10^4, 10^5 and 10^6 disks on one thread: particle-steps "
+                            "per second, bytes per disk and the share of rebuilds at each size (a minute or two)")
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
     bench.add_argument("--analysis", metavar="PACKING.h5",
                        help="time every analysis of 'granlab analyze' on this packing instead (prepared there by "

@@ -166,3 +166,17 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
     folder = granlab("run", str(tmp_path), check=False)
     assert folder.returncode == 2 and f"{str(tmp_path)!r} is a folder: give a scene file" in folder.stderr
     assert granlab("--version").stdout.startswith("granlab ")
+
+
+def test_bench_scaling_reports_each_size_with_its_memory_and_rebuild_share():
+    from engine import bench
+
+    result = bench.scaling(sides=(6, 12), steps=300)
+    assert [row["particles"] for row in result["sizes"]] == [36, 144]
+    for row in result["sizes"]:
+        assert row["steps"] == 300 and row["ns_per_particle_step"] == pytest.approx(1e9 / row["particle_steps_per_s"])
+        assert 500 < row["bytes_per_disk"] < 5000
+        assert 0.0 <= row["rebuild_share"] <= 1.0 and (row["rebuild_share"] > 0) == (row["rebuilds"] > 0)
+        assert row["rebuild_in_steps"] > 0.0
+    assert result["worst_over_best"] >= 1.0
+    assert bench.rebuild_seconds(bench.reference_system(12)) > 0.0
