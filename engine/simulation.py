@@ -27,7 +27,7 @@ from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORM
                            ZETA_R)
 from .params import TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
 from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
-                    ParticleState, WallState, Workspace)
+                    ParticleState, RunOptions, WallState, Workspace)
 
 NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
 
@@ -372,11 +372,12 @@ class Simulation:
     def _advance(self, dt: float, n_steps: int) -> tuple[int, int]:
         """One call of the kernel driver, growing the contact table until it fits."""
         while True:
-            done, code = k_integrate.advance(
-                self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), self.contacts.arrays(),
-                self._spare.arrays(), self.workspace, self._law_vector, self.normal_model_code,
-                self.tangential_model_code, self.gravity, self._has_loads(), dt, self._time_origin,
-                self.step - self._step_origin, n_steps, self.skin, self.integration.max_overlap, self.threads())
+            run = RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
+                             self._time_origin, self.step - self._step_origin, n_steps, self.skin,
+                             self.integration.max_overlap, self.threads())
+            done, code = k_integrate.advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
+                                             self.contacts.arrays(), self._spare.arrays(), self.workspace,
+                                             self._law_vector, run)
             if dt > 0:
                 self.step += done
             if code != k_integrate.CODE_OVERFLOW:

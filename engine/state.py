@@ -51,6 +51,14 @@ ContactArrays = namedtuple(
     "rolling_spring status normal_force tangential_force surface_gap",
 )
 
+RunOptions = namedtuple(
+    "RunOptions",
+    "normal_model tangential_model gravity has_loads dt time_origin step_offset n_steps skin max_overlap n_chunks",
+)
+"""What one call of the step driver needs besides the state: the law's model codes, gravity (2,),
+whether disks carry applied loads, the step, the clock (``time_origin``, ``step_offset``), the
+number of steps, the Verlet skin, the overlap that counts as a divergence and the thread chunks."""
+
 Workspace = namedtuple(
     "Workspace",
     "force_buffer wall_buffer tally_buffer virial_correction lagged_virial lagged_kinetic wrapped wraps reference "

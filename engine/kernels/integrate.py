@@ -367,9 +367,9 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks,
 
 
 @njit(**JIT)
-def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time_origin,
-            step_offset, n_steps, skin, max_overlap, n_chunks):
-    """Run up to ``n_steps`` velocity-Verlet steps; returns ``(steps_done, code)``.
+def advance(p, w, cell, ct, spare, ws, law, run):
+    """Run up to ``run.n_steps`` velocity-Verlet steps (``run``: :class:`engine.state.RunOptions`);
+    returns ``(steps_done, code)``.
 
     Step ``k`` of this call ends at ``time_origin + (step_offset + k + 1) dt``. ``dt = 0`` with
     ``n_steps = 1`` only evaluates the forces of the current state. This outer loop rebuilds
@@ -377,23 +377,22 @@ def advance(p, w, cell, ct, spare, ws, law, normal_model, tangential_model, grav
     allocates and so needs no reference counting. A run split into several calls does the
     same arithmetic as one call: it continues bit for bit.
     """
-    if n_steps == 0:
+    if run.n_steps == 0:
         return 0, CODE_OK
     scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
-        _start(p, w, cell, ws, gravity, has_loads, dt, time_origin + step_offset * dt, skin, n_chunks, scale)
+        _start(p, w, cell, ws, run, scale)
         if ws.gather[G_BAD] > 0:
             return 0, CODE_NAN
-        if _tunnels(ws, max_overlap):
+        if _tunnels(ws, run.max_overlap):
             return 0, CODE_TUNNEL
     step = 0
     while True:
         if ws.flags[FLAG_REBUILD]:
-            code = rebuild(p, w, cell, ct, spare, ws, law, skin)
+            code = rebuild(p, w, cell, ct, spare, ws, law, run.skin)
             if code != CODE_OK:
                 return step, code
-        step, code = _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt,
-                            time_origin, step_offset, step, n_steps, skin, max_overlap, n_chunks, scale)
+        step, code = _steps(p, w, cell, ct, ws, law, run, step, scale)
         if code != CODE_REBUILD:
             return step, code
 
@@ -410,23 +409,26 @@ def _tunnels(ws, max_overlap):
 
 
 @njit(**KERNEL)
-def _start(p, w, cell, ws, gravity, has_loads, dt, time, skin, n_chunks, scale):
+def _start(p, w, cell, ws, run, scale):
     """First half kick and drift of a call that starts on a whole step."""
+    dt = run.dt
     half = 0.5 * dt
-    walls_step(w, time, half, 1, dt)
+    walls_step(w, run.time_origin + run.step_offset * dt, half, 1, dt)
     cell_step(cell, ws.lagged_virial, ws.lagged_kinetic, half, 1, dt, scale)
     for a in range(2):
         ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-    _pass(p, cell, ws, gravity, has_loads, n_chunks, False, False, half, 1, dt, scale)
+    _pass(p, cell, ws, run.gravity, run.has_loads, run.n_chunks, False, False, half, 1, dt, scale)
     ws.flags[FLAG_PHASE] = PHASE_DRIFTED
-    if _needs_rebuild(w, cell, ws, skin):
+    if _needs_rebuild(w, cell, ws, run.skin):
         ws.flags[FLAG_REBUILD] = 1
 
 
 @njit(**KERNEL)
-def _steps(p, w, cell, ct, ws, law, normal_model, tangential_model, gravity, has_loads, dt, time_origin, step_offset,
-           step, n_steps, skin, max_overlap, n_chunks, scale):
+def _steps(p, w, cell, ct, ws, law, run, step, scale):
     """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``)."""
+    normal_model, tangential_model, gravity, has_loads = run.normal_model, run.tangential_model, run.gravity, run.has_loads
+    dt, time_origin, step_offset, n_steps = run.dt, run.time_origin, run.step_offset, run.n_steps
+    skin, max_overlap, n_chunks = run.skin, run.max_overlap, run.n_chunks
     half = 0.5 * dt
     while True:
         last = step + 1 == n_steps
