@@ -217,7 +217,7 @@ class Replay:
 
 def _is_run_file(path: Path) -> bool:
     with h5md.open_run(path) as f:
-        return "contacts/offset" in f and "parameters" in f
+        return h5md.is_run_file(f)
 
 
 def _packing_frame(index: int, state: PackingState) -> dict:

@@ -102,10 +102,7 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
     elif out.suffix != SUFFIXES[fmt]:
         raise ParameterError("--out", str(out), f"a file name ending in {SUFFIXES[fmt]} for --format {fmt}")
     with h5md.open_run(path) as f:
-        if "contacts/offset" not in f or "parameters" not in f:
-            raise h5md.RunFileError(f"{str(path)!r} is not a GranLab run file (no /contacts or /parameters); export "
-                                    "writes the files of granlab run --out, granlab prepare --out and the lab's "
-                                    "Save run")
+        h5md.require_run_file(f, "export")
         count = h5md.frame_count(f)
         if count == 0:
             raise h5md.RunFileError(f"{str(path)!r} holds no complete frame")

@@ -627,10 +627,7 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
     fps = check_fps(fps, "--fps")
     with h5md.open_run(path) as f:
         count = h5md.frame_count(f)
-        if "contacts/offset" not in f or "parameters" not in f:
-            raise h5md.RunFileError(f"{str(path)!r} is not a GranLab run file (no /contacts or /parameters); "
-                                    "render draws the files of granlab run --out, granlab prepare --out and the "
-                                    "lab's Save run")
+        h5md.require_run_file(f, "render")
         if count == 0:
             raise h5md.RunFileError(f"{str(path)!r} holds no complete frame")
         indices = select_frames(("-1" if suffix == ".png" else ":") if frames is None else frames, count, "--frames")

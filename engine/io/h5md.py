@@ -422,6 +422,18 @@ def _truncated(path: Path) -> RunFileError:
                         f"parameters past the cut are lost (was it cut short while copied or written?)")
 
 
+def is_run_file(f: h5py.File) -> bool:
+    """Whether an open H5MD file is a GranLab run file (its contact table and parameters)."""
+    return "contacts/offset" in f and "parameters" in f
+
+
+def require_run_file(f: h5py.File, command: str) -> None:
+    """Refuse an H5MD file that is not a GranLab run file, naming what ``command`` takes."""
+    if not is_run_file(f):
+        raise RunFileError(f"{f.filename!r} is not a GranLab run file (no /contacts or /parameters); {command} "
+                           "takes the files of granlab run --out, granlab prepare --out and the lab's Save run")
+
+
 def frame_count(f: h5py.File) -> int:
     """Complete frames: the fewest frames any time-dependent particle element holds."""
     if "particles/all/position" not in f:
