@@ -21,9 +21,8 @@ from engine.analysis.states import PackingState
 from engine.studies import RatchetCurve
 
 from .analysis import AnalysisResult
-from .plots import AnalysisFigures, compact, lab_figure, legend_above
+from .plots import MODEL_COLORS, AnalysisFigures, compact, lab_figure, legend_above
 
-MODEL_COLORS = {"cundall-strack": "#d62728", "alpha": "#1f77b4", "angle": "#2ca02c"}
 _shown_inline = False
 
 
@@ -48,7 +47,7 @@ def strain_figure(curves: list[RatchetCurve]):
 
     figures = []
     for curve in curves:
-        color = MODEL_COLORS.get(curve.model, "#555555")
+        color = MODEL_COLORS[curve.model]
         cycles = curve.cycles[curve.reference_cycle:]
         verdict = curve.verdict
         verdict_text = f"Δγ = {compact(verdict.dgamma)} per cycle" if verdict.ratcheting else "no ratcheting"

@@ -21,6 +21,7 @@ from bokeh.models import ColorBar, ColumnDataSource, CustomJSTickFormatter, Line
 from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
+from engine.params import TANGENTIAL
 from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 from . import analysis
@@ -397,6 +398,9 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
     return plot
 
 
+MODEL_COLORS = dict(zip(TANGENTIAL, ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")))
+"""One colour per tangential model, in the registry's order, in every plot that compares them."""
+
 LINES = {
     "energy": {"title": "Energy budget", "series": "time", "y": "energy (paper units)",
                "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
@@ -404,15 +408,13 @@ LINES = {
                          ("t", "balance", "balance (should stay 0)", "#000000")]},
     "coordination": {"title": "Coordination number z = 2M/N", "series": "time", "y": "z (contacts per disk)",
                      "lines": [("t", "z", "z", "#1f77b4")]},
-    "springs": {"title": "Spring D_t of the three models (ratcheting Fig. 9)", "series": "springs",
+    "springs": {"title": "Spring D_t of each tangential model (ratcheting Fig. 9)", "series": "springs",
                 "y": "D_t (length, paper units)",
-                "lines": [("t", "dt_cundall_strack", "Cundall–Strack", "#d62728"),
-                          ("t", "dt_alpha", "α-corrected", "#1f77b4"), ("t", "dt_angle", "angle-based", "#2ca02c")]},
+                "lines": [("t", f"dt_{m.key}", m.label, MODEL_COLORS[m.name]) for m in TANGENTIAL.values()]},
     "spring-path": {"title": "(D_t, D_n) along the closed path A→B→C→D→A", "series": "springs",
                     "x": "D_t (length, paper units)", "y": "D_n (gap, < 0: overlap)",
-                    "lines": [("dt_cundall_strack", "dn_cundall_strack", "Cundall–Strack", "#d62728"),
-                              ("dt_alpha", "dn_alpha", "α-corrected", "#1f77b4"),
-                              ("dt_angle", "dn_angle", "angle-based", "#2ca02c")]},
+                    "lines": [(f"dt_{m.key}", f"dn_{m.key}", m.label, MODEL_COLORS[m.name])
+                              for m in TANGENTIAL.values()]},
     "block-load": {"title": "Sideways load and the block's velocity", "series": "block",
                    "y": "load / μF_n;  velocity (paper units)",
                    "lines": [("t", "load_ratio", "load / μF_n", "#1f77b4"), ("t", "velocity", "velocity", "#d62728")]},

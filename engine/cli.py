@@ -148,17 +148,19 @@ def _print_run(result: dict) -> None:
 def _experiment(args) -> dict:
     from .protocols.teaching import EXPERIMENTS
 
-    options = {"model": args.model}
-    for key in ("zeta", "mu", "dt"):
-        value = getattr(args, key)
-        if value is not None:
-            options[key] = value
-    result = EXPERIMENTS[args.name](**options).as_dict()
-    result["experiment"] = args.name
-    return result
+    options = {key: getattr(args, key) for key in ("zeta", "mu", "dt") if getattr(args, key) is not None}
+    models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
+    results = [dict(EXPERIMENTS[args.name](model=model, **options).as_dict(), experiment=args.name)
+               for model in models]
+    return {"experiment": args.name, "models": results} if args.model == "all" else results[0]
 
 
 def _print_experiment(result: dict) -> None:
+    for one in result.get("models", [result]):
+        _print_one_experiment(one)
+
+
+def _print_one_experiment(result: dict) -> None:
     name = result["experiment"]
     if name == "collision":
         print(f"collision ({result['model']}, zeta = {result['zeta']}, dt = {result['dt']:.3g})")
@@ -432,8 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")
     experiment.add_argument("name", choices=("collision", "closed-path", "block"))
-    experiment.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS,
-                            help="tangential spring model")
+    experiment.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS + ("all",),
+                            help="tangential spring model (all: each registered model in turn)")
     experiment.add_argument("--zeta", type=_float, help="normal damping ratio zeta in [0, 1)")
     experiment.add_argument("--mu", type=_float, help="friction coefficient (inf: no sliding)")
     experiment.add_argument("--dt", type=_float, help="time step (default: from the stability bound)")

@@ -20,7 +20,7 @@ from .errors import ParameterError
 @dataclass(frozen=True)
 class TangentialModel:
     """A tangential spring model: its ``name`` (what scenes, the command line and the lab take),
-    the ``code`` the kernels switch on, its ``title`` in words, whether its tangential force and
+    the ``code`` the kernels switch on, its ``title`` in words and its ``label`` in a legend, whether its tangential force and
     spring rate carry ``alpha = (r_i + r_j) / |x_i - x_j|`` (ratcheting Eqs. 23-25, 30; the angle
     spring's force does too), and whether a closed path leaves it the residue a / (r_i + r_j) of
     ratcheting Eq. 17 (``path_dependent``)."""
@@ -28,15 +28,24 @@ class TangentialModel:
     name: str
     code: int
     title: str
+    label: str
     alpha_factor: bool
     path_dependent: bool
 
+    @property
+    def key(self) -> str:
+        """The name as an identifier (series columns, the kernels' module)."""
+        return self.name.replace("-", "_")
+
 
 TANGENTIAL = {model.name: model for model in (
-    TangentialModel("cundall-strack", 0, "Cundall–Strack (ratcheting Eqs. 7–11)", False, True),
-    TangentialModel("alpha", 1, "α-corrected integration (ratcheting Eqs. 23–25, 30)", True, False),
-    TangentialModel("angle", 2, "angle-based spring (ratcheting Eqs. 18–22)", True, False))}
-"""The one registry of tangential models, by name; every other list of them is made from it."""
+    TangentialModel("cundall-strack", 0, "Cundall–Strack (ratcheting Eqs. 7–11)", "Cundall–Strack", False, True),
+    TangentialModel("alpha", 1, "α-corrected integration (ratcheting Eqs. 23–25, 30)", "α-corrected", True, False),
+    TangentialModel("angle", 2, "angle-based spring (ratcheting Eqs. 18–22)", "angle-based", True, False),
+    TangentialModel("lammps", 3, "LAMMPS gran/hooke/history (shear vector; Coulomb on the total normal force)",
+                    "LAMMPS hooke/history", False, True))}
+"""The one registry of tangential models, by name; every other list of them is made from it. The
+kernels of a model are the module of :mod:`engine.kernels.tangential` named after it."""
 TANGENTIAL_MODELS = tuple(TANGENTIAL)
 NORMAL_MODELS = ("linear", "area")
 WALL_MODES = ("fixed", "velocity", "force")
@@ -110,8 +119,9 @@ class ContactLaw(_Replaceable):
       contact (Gilabert Eqs. 4-5).
     - tangential: spring ``F_t = -K_t D_t - Gamma_t V_t`` (quasi-rigidity Eq. 7) with
       ``|F_t| <= mu N^e`` (Gilabert Eq. 8); ``D_t`` follows ``tangential_model``:
-      ``"cundall-strack"`` (ratcheting Eqs. 7-11), ``"alpha"`` (Eqs. 23-25, 30) or
-      ``"angle"`` (Eqs. 18-22).
+      ``"cundall-strack"`` (ratcheting Eqs. 7-11), ``"alpha"`` (Eqs. 23-25, 30),
+      ``"angle"`` (Eqs. 18-22) or ``"lammps"`` (LAMMPS's ``gran/hooke/history``: a shear vector
+      projected on the new tangent each step, ``|F_t| <= mu |F_n|`` with the total ``F_n``).
     - rolling: moment ``-K_r dtheta - Gamma_r (w_i - w_j)`` with ``|moment| <= mu_r N^e``
       (Gilabert Eq. 10) and ``Gamma_r = 2 zeta_r sqrt(K_r I_i I_j / (I_i + I_j))`` (``I_i``
       against a wall). Gilabert has no viscous part (``zeta_r = 0``); with it, a disk held by

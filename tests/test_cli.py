@@ -7,6 +7,8 @@ import sys
 import numpy as np
 import pytest
 
+from engine.params import TANGENTIAL_MODELS
+
 
 def granlab(*args, check=True):
     process = subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True,
@@ -63,6 +65,8 @@ def test_experiment_json_keys():
     closed = json.loads(granlab("experiment", "closed-path", "--model", "angle", "--json").stdout)
     assert {"delta_Dt", "predicted_delta_Dt", "enclosed_area"} <= set(closed)
     assert closed["delta_Dt"] == 0.0
+    every = json.loads(granlab("experiment", "closed-path", "--model", "all", "--json").stdout)
+    assert [one["model"] for one in every["models"]] == list(TANGENTIAL_MODELS)
     block = json.loads(granlab("experiment", "block", "--mu", "0.3", "--json").stdout)
     assert {"max_Ft_over_muFn", "friction_work_positive"} <= set(block)
     assert block["friction_work_positive"] is False

@@ -19,7 +19,7 @@ from engine.io.scene import parse_scene
     ("damping_ratio", -0.2, ">= 0"),
     ("friction", math.nan, "not NaN"),
     ("normal_stiffness", math.inf, "finite"),
-    ("tangential_model", "hertz", "'cundall-strack', 'alpha', 'angle'"),
+    ("tangential_model", "hertz", "'cundall-strack', 'alpha', 'angle', 'lammps'"),
     ("normal_model", "cubic", "'linear', 'area'"),
     ("cohesion_force", -1.0, ">= 0"),
     ("rolling_friction", -0.01, ">= 0"),

@@ -58,22 +58,25 @@ def test_closed_path_result_reports_the_paper_quantities():
 
 
 def test_one_registry_names_the_tangential_models_for_the_kernels_the_command_line_and_the_experiments():
-    """engine.params.TANGENTIAL is the only list of the models: the kernels' codes, the choices of
+    """engine.params.TANGENTIAL is the only list of the models: the kernels' modules and codes, the choices of
     the command line and the lab, and the closed path's prediction (Eq. 17's residue only for a
     path-dependent spring) come from it."""
     from engine.cli import build_parser
-    from engine.kernels import laws
+    from engine.kernels import tangential
     from engine.params import TANGENTIAL, TANGENTIAL_MODELS
     from engine.protocols.settings import LabSettings
 
     codes = [model.code for model in TANGENTIAL.values()]
     assert TANGENTIAL_MODELS == tuple(TANGENTIAL) and len(set(codes)) == len(codes)
-    assert (laws.TANGENTIAL_CS, laws.TANGENTIAL_ALPHA, laws.TANGENTIAL_ANGLE) == tuple(codes)
+    assert tangential.CODES == tuple(sorted(codes))
+    for model in TANGENTIAL.values():
+        laws = tangential.MODELS[model.code]
+        assert all(callable(getattr(laws, f)) for f in ("spring_rate", "trial_spring", "limit", "centre_factor"))
     commands = next(a for a in build_parser()._actions if a.dest == "command").choices
     experiment = next(a for a in commands["experiment"]._actions if a.dest == "model")
     study = next(a for a in next(a for a in commands["study"]._actions if a.dest == "kind").choices["ratchet"]._actions
                  if a.dest == "model")
-    assert tuple(experiment.choices) == TANGENTIAL_MODELS and tuple(study.choices) == TANGENTIAL_MODELS + ("all",)
+    assert tuple(experiment.choices) == tuple(study.choices) == TANGENTIAL_MODELS + ("all",)
     for name, model in TANGENTIAL.items():
         assert LabSettings(tangential_model=name).tangential_model == name
         predicted = teaching.closed_path(model=name).predicted_delta_Dt

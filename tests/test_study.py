@@ -9,6 +9,7 @@ import pytest
 
 from engine import ParameterError
 from engine.io import h5md
+from engine.params import TANGENTIAL
 from engine.studies import RatchetStudy, ratchet_sample, summarize
 
 
@@ -22,7 +23,7 @@ def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):
     assert process.returncode == 0, process.stderr
     summary = json.loads(process.stdout)
     assert summary["scheduler"] == "local"
-    assert set(summary["models"]) == {"cundall-strack", "alpha", "angle"}
+    assert set(summary["models"]) == set(TANGENTIAL)
     for model, data in summary["models"].items():
         assert data["completed"] == 2 and 0.0 <= data["fraction_ratcheting"] <= 1.0
         assert [s["seed"] for s in data["samples"]] == [0, 1]

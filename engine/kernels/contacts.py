@@ -11,12 +11,10 @@ along its normal), ``n = r/|r|``, ``t = z × n``:
 
 - ``V_n = (v_i - v_j) · n`` and ``(v_i - v_j) · t`` include the affine velocity of a
   deforming periodic cell and the velocity of a moving wall;
-- Cundall-Strack: ``dD_t/dt = (v_i - v_j)·t - r_i w_i - r_j w_j`` (ratcheting Eq. 9);
-- alpha-corrected: ``dD_t/dt = alpha (v_i - v_j)·t - r_i w_i - r_j w_j`` with
-  ``alpha = (r_i + r_j)/|r|`` (Eqs. 24-25), tangential force ``alpha F_t`` on the centres (Eq. 30);
-- angle-based: ``D_t = r_i wrap(phi + pi - theta_i - a_i) + r_j wrap(phi - theta_j - a_j)``
-  from the body-frame angles ``a`` of the material points of first contact (Eqs. 19, 21-22),
-  force as for alpha; its rate is Eq. 24;
+- the tangential spring ``D_t``, its rate, its Coulomb limit and the factor of ``F_t`` on the
+  centres are those of the row's tangential model (:mod:`engine.kernels.tangential`): the
+  loop sets the anchors (body-frame angles of the material points of first contact, ratcheting
+  Eq. 21) and hands the model the row's geometry;
 - the moment of ``F_t`` is ``-r F_t`` on both disks; the rolling moment ``-K_r dtheta`` on i
   and ``+K_r dtheta`` on j with ``d dtheta/dt = w_i - w_j`` (Gilabert Eq. 10).
 
@@ -25,12 +23,13 @@ On sliding, both anchors move by half the slip, so the rolling distance of Eq. 2
 
 import math
 
-from numba import njit, prange, uint64
+from numba import literal_unroll, literally, njit, prange, uint64
 
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from . import tangential
 from .jit import KERNEL, PARALLEL
-from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, TANGENTIAL_ANGLE, TANGENTIAL_CS, ZETA, ZETA_R,
-                   cohesion_force, coulomb, disk_arc, normal_elastic, rolling, wall_arc)
+from .laws import D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force, normal_elastic, rolling
+from .tangential import CODES as TANGENTIAL_CODES, RowGeometry
 
 # per-chunk scalar tallies
 TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
@@ -70,18 +69,23 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
 
     One chunk runs here, in the calling thread; more run in parallel. (A parallel launch
     takes the GIL: a single-threaded run never does, so a busy Python thread cannot stall it.)
+    The loop is compiled once per tangential model (:data:`engine.kernels.tangential.CODES`), all
+    of them with this kernel: the model is chosen here, once per step, not per row.
     """
-    if n_chunks == 1:
-        contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, 0, 1,
-                      force_buffer, wall_buffer, tally_buffer)
-    else:
-        _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store,
-                                 n_chunks, force_buffer, wall_buffer, tally_buffer)
+    for code in literal_unroll(TANGENTIAL_CODES):
+        if tangential_model == code:
+            if n_chunks == 1:
+                contact_chunk(p, w, cell, ct, law, normal_model, code, dt, overlap_limit, store, 0, 1,
+                              force_buffer, wall_buffer, tally_buffer)
+            else:
+                _contact_chunks_parallel(p, w, cell, ct, law, normal_model, code, dt, overlap_limit, store,
+                                         n_chunks, force_buffer, wall_buffer, tally_buffer)
 
 
 @njit(**PARALLEL)
 def _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store,
                              n_chunks, force_buffer, wall_buffer, tally_buffer):
+    literally(tangential_model)
     for c in prange(n_chunks):
         contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
                       force_buffer, wall_buffer, tally_buffer)
@@ -90,7 +94,9 @@ def _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model
 @njit(**KERNEL)
 def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
                   force_buffer, wall_buffer, tally_buffer):
-    """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``."""
+    """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``, with the laws
+    of tangential model ``tangential_model`` (a compile-time code)."""
+    literally(tangential_model)
     position = p.position
     velocity = p.velocity
     angle = p.angle
@@ -177,6 +183,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             relative_spin = omega[i] - omega[j]
             alpha = (ri + rj) * inv_dist
             gap = dist - ri - rj
+            angle_j = angle[j]
+            wall_shift = 0.0
         else:
             wall = j - n
             rj = 0.0
@@ -200,6 +208,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             spin_sum = ri * omega[i]
             relative_spin = omega[i]
             alpha = 1.0
+            angle_j = 0.0
+            wall_shift = wall_tangential_position[wall]
         tx = -ny
         ty = nx
         vn = dvx * nx + dvy * ny
@@ -221,32 +231,20 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 phi = math.atan2(ny, nx)
                 anchor_i[k] = phi + math.pi - angle[i]
                 if is_wall:
-                    anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_tangential_position[j - n]
+                    anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_shift
                 else:
                     anchor_j[k] = phi - angle[j]
                 tangential_spring[k] = 0.0
                 rolling_spring[k] = 0.0
-            if tangential_model == TANGENTIAL_CS:
-                rate = vt - spin_sum
-            else:
-                rate = alpha * vt - spin_sum
-            if tangential_model == TANGENTIAL_ANGLE:
-                phi = math.atan2(ny, nx)
-                trial = disk_arc(ri, phi + math.pi, angle[i], anchor_i[k])
-                if is_wall:
-                    trial += wall_arc(tx, ty, position[i, 0], position[i, 1], wall_tangential_position[j - n],
-                                      anchor_j[k])
-                else:
-                    trial += disk_arc(rj, phi, angle[j], anchor_j[k])
-            elif fresh:
-                trial = 0.0
-            else:
-                trial = tangential_spring[k] + rate * dt
+            row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, anchor_i[k], anchor_j[k], is_wall,
+                              position[i, 0], position[i, 1], wall_shift)
+            rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
             previous = 0.0 if fresh else tangential_spring[k]
-            spring, ft, state, slip = coulomb(kt, mu, gamma_t, ne, trial, rate)
-            if state == STATUS_STICK:
-                damping -= (ft + kt * spring) * rate * dt
-            else:
+            trial = tangential.trial_spring(tangential_model, previous, rate, dt, fresh, row)
+            spring, ft, state, slip = tangential.limit(tangential_model, kt, mu, gamma_t, ne, fn, trial, rate)
+            # the viscous part of F_t, F_t + K_t D_t, does work (zero while a GranLab spring slides)
+            damping -= (ft + kt * spring) * rate * dt
+            if state != STATUS_STICK:
                 # the elastic force of the step before and of this one, averaged as velocity
                 # Verlet averages them in the kinetic energy: first-order errors cancel
                 sliding += 0.5 * kt * (previous + spring) * slip
@@ -279,7 +277,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             normal_force[k] = fn
             tangential_force[k] = ft
             surface_gap[k] = gap
-        ft_centre = ft if tangential_model == TANGENTIAL_CS else alpha * ft
+        ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
         fx = fn * nx + ft_centre * tx
         fy = fn * ny + ft_centre * ty
         force_buffer[c, i, 0] += fx

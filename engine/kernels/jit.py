@@ -33,7 +33,7 @@ PARALLEL = dict(JIT, parallel=True)
 KERNEL = dict(JIT, _nrt=False)
 
 KERNELS = Path(__file__).resolve().parent
-SOURCES = tuple(sorted(KERNELS.glob("*.py"))) + (KERNELS.parent / "state.py", KERNELS.parent / "params.py")
+SOURCES = tuple(sorted(KERNELS.rglob("*.py"))) + (KERNELS.parent / "state.py", KERNELS.parent / "params.py")
 
 
 def sources_stamp(paths) -> str:
@@ -58,7 +58,7 @@ class _PackageStamped:
 
     @classmethod
     def from_function(cls, py_func, py_file):
-        if Path(py_file).resolve().parent != KERNELS:
+        if KERNELS not in Path(py_file).resolve().parents:
             return None
         return super().from_function(py_func, py_file)
 

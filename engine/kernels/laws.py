@@ -13,7 +13,6 @@ import math
 
 from numba import njit
 
-from ..params import TANGENTIAL
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL
 
@@ -22,7 +21,6 @@ KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R, ZETA_R = range(10)
 LAW_SIZE = 10
 
 NORMAL_LINEAR, NORMAL_AREA = 0, 1
-TANGENTIAL_CS, TANGENTIAL_ALPHA, TANGENTIAL_ANGLE = (TANGENTIAL[name].code for name in ("cundall-strack", "alpha", "angle"))
 
 TWO_PI = 2.0 * math.pi
 

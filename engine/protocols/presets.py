@@ -26,7 +26,7 @@ import numpy as np
 
 from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
-from ..params import TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall
+from ..params import TANGENTIAL, TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
 from ..state import ParticleState
 from .cyclic import CyclicLoad, apply_load
@@ -515,7 +515,7 @@ class EllipticPreset(RatchetPreset):
 
 # ---------------------------------------------------------------------------------------------- closed path
 class ClosedPathPreset(Preset):
-    """Ratcheting Fig. 8 three times side by side: one pair per tangential model.
+    """Ratcheting Fig. 8 side by side for every registered tangential model, one pair each.
 
     The upper disk of each pair is carried A -> B -> C -> D -> A over and over, without rotating
     or sliding (mu = inf). Series ``springs``: (t, D_t and D_n of each model), sampled along the
@@ -523,11 +523,11 @@ class ClosedPathPreset(Preset):
     """
 
     name = "closed-path"
-    title = "A closed path, three tangential springs (ratcheting Figs. 8-9)"
+    title = "A closed path, every tangential spring (ratcheting Figs. 8-9)"
     controls = ()
     defaults = {"particles": 2, "friction": math.inf, "damping_ratio": 0.0, "speed": 0.5}
-    series = {"springs": ("t", "dt_cundall_strack", "dt_alpha", "dt_angle", "dn_cundall_strack", "dn_alpha",
-                          "dn_angle")}
+    series = {"springs": ("t",) + tuple(f"dt_{model.key}" for model in TANGENTIAL.values())
+              + tuple(f"dn_{model.key}" for model in TANGENTIAL.values())}
     path_series = ("springs",)
     plots = key_plots = ("spring-path", "springs")
     clock_unit = "loops"

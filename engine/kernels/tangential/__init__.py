@@ -1,0 +1,90 @@
+"""Tangential spring models: one module each, named in the registry :data:`engine.params.TANGENTIAL`.
+
+A model module holds four small kernels, which the one contact loop calls for each touching row:
+
+- ``spring_rate(vt, spin_sum, alpha)``: the rate of ``D_t`` from the relative tangential velocity of
+  the centres ``vt``, the spins ``r_i w_i + r_j w_j`` and ``alpha = (r_i + r_j)/|r|``;
+- ``trial_spring(previous, rate, dt, fresh, row)``: ``D_t`` before the Coulomb limit, from the
+  spring of the step before (``fresh`` on the first step of a contact) and the row's
+  :data:`RowGeometry`;
+- ``limit(kt, mu, gamma_t, ne, fn, trial, rate)``: ``(D_t, F_t, status, slip)`` after the Coulomb
+  limit, given the elastic ``ne`` and total ``fn`` normal forces;
+- ``centre_factor(alpha)``: what ``F_t`` is multiplied by on the centres (its moment is ``-r F_t``).
+
+The functions below dispatch on a model code known when the contact loop is compiled (a literal):
+each model gets its own loop, with its laws inlined, and nothing is decided per row. Adding a model
+is its module here and its line in the registry.
+"""
+
+import importlib
+from collections import namedtuple
+
+from numba import types
+from numba.extending import overload
+
+from ...params import TANGENTIAL
+
+RowGeometry = namedtuple("RowGeometry", "nx ny rx ry dvx dvy ri rj angle_i angle_j anchor_i anchor_j is_wall xi yi "
+                                        "wall_shift")
+"""What a model may read of a touching row: normal ``n``, branch vector ``r`` (for a wall, from the
+wall to the centre), relative velocity ``V`` of the centres, radii (``rj = 0`` for a wall), body
+angles and anchors (for a wall, ``anchor_j`` is along the wall and ``angle_j = 0``), the centre of
+disk i and how far the wall has slid along itself."""
+
+MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for model in TANGENTIAL.values()}
+CODES = tuple(sorted(MODELS))
+"""The codes the contact loop is compiled for, one loop each."""
+
+
+def _model(code):
+    if not isinstance(code, types.IntegerLiteral):
+        return None
+    return MODELS[code.literal_value]
+
+
+def spring_rate(model, vt, spin_sum, alpha):
+    """``dD_t/dt`` of model ``model`` (a compile-time code)."""
+
+
+def trial_spring(model, previous, rate, dt, fresh, row):
+    """``D_t`` before the Coulomb limit."""
+
+
+def limit(model, kt, mu, gamma_t, ne, fn, trial, rate):
+    """``(D_t, F_t, status, slip)`` after the Coulomb limit."""
+
+
+def centre_factor(model, alpha):
+    """The factor of ``F_t`` on the centres."""
+
+
+@overload(spring_rate, prefer_literal=True)
+def _spring_rate(model, vt, spin_sum, alpha):
+    law = _model(model)
+    if law is not None:
+        impl = law.spring_rate
+        return lambda model, vt, spin_sum, alpha: impl(vt, spin_sum, alpha)
+
+
+@overload(trial_spring, prefer_literal=True)
+def _trial_spring(model, previous, rate, dt, fresh, row):
+    law = _model(model)
+    if law is not None:
+        impl = law.trial_spring
+        return lambda model, previous, rate, dt, fresh, row: impl(previous, rate, dt, fresh, row)
+
+
+@overload(limit, prefer_literal=True)
+def _limit(model, kt, mu, gamma_t, ne, fn, trial, rate):
+    law = _model(model)
+    if law is not None:
+        impl = law.limit
+        return lambda model, kt, mu, gamma_t, ne, fn, trial, rate: impl(kt, mu, gamma_t, ne, fn, trial, rate)
+
+
+@overload(centre_factor, prefer_literal=True)
+def _centre_factor(model, alpha):
+    law = _model(model)
+    if law is not None:
+        impl = law.centre_factor
+        return lambda model, alpha: impl(alpha)
