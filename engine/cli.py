@@ -32,7 +32,7 @@ import numba
 from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError
 from .io.jsonsafe import jsonable
-from .params import TANGENTIAL_MODELS
+from .params import TANGENTIAL, TANGENTIAL_MODELS
 from .reproduce import REPRODUCTIONS
 
 
@@ -124,6 +124,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         "energy": snap.energy.as_dict(), "contacts": snap.contacts.count, "status_counts": sim.status_counts(),
         "wall_names": list(snap.wall_names), "wall_forces": snap.wall_forces, "cell_lengths": snap.cell_lengths,
         "series": series, "run_file": out,
+        "first_order": bool(snap.energy.dissipated_damping) and not TANGENTIAL[sim.law.tangential_model].whole_step_dashpots,
     }
 
 
@@ -139,7 +140,7 @@ def _print_run(result: dict) -> None:
     first = result["series"]["balance"][0]
     drift = energy["balance"] - first
     scale = max(abs(first), 1e-300)
-    order = "first order in dt: viscous damping" if energy["dissipated_damping"] else "second order in dt"
+    order = "first order in dt: LAMMPS's half-step dashpots" if result["first_order"] else "second order in dt"
     print(f"  energy balance: {energy['balance']:.6g} (drift {drift:.3g}, {drift / scale:.2e} relative; {order})")
     if result["run_file"]:
         print(f"  run file: {result['run_file']}")

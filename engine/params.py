@@ -20,10 +20,12 @@ from .errors import ParameterError
 @dataclass(frozen=True)
 class TangentialModel:
     """A tangential spring model: its ``name`` (what scenes, the command line and the lab take),
-    the ``code`` the kernels switch on, its ``title`` in words and its ``label`` in a legend, whether its tangential force and
-    spring rate carry ``alpha = (r_i + r_j) / |x_i - x_j|`` (ratcheting Eqs. 23-25, 30; the angle
-    spring's force does too), and whether a closed path leaves it the residue a / (r_i + r_j) of
-    ratcheting Eq. 17 (``path_dependent``)."""
+    the ``code`` the kernels switch on, its ``title`` in words and its ``label`` in a legend;
+    whether its tangential force and spring rate carry ``alpha = (r_i + r_j) / |x_i - x_j|``
+    (ratcheting Eqs. 23-25, 30; the angle spring's force does too); whether a closed path leaves
+    it the residue a / (r_i + r_j) of ratcheting Eq. 17 (``path_dependent``); and whether its
+    dashpots take the velocities predicted at the whole step, second order in dt
+    (``whole_step_dashpots``), or the half-step ones, first order (LAMMPS's integration)."""
 
     name: str
     code: int
@@ -31,6 +33,7 @@ class TangentialModel:
     label: str
     alpha_factor: bool
     path_dependent: bool
+    whole_step_dashpots: bool = True
 
     @property
     def key(self) -> str:
@@ -43,7 +46,7 @@ TANGENTIAL = {model.name: model for model in (
     TangentialModel("alpha", 1, "α-corrected integration (ratcheting Eqs. 23–25, 30)", "α-corrected", True, False),
     TangentialModel("angle", 2, "angle-based spring (ratcheting Eqs. 18–22)", "angle-based", True, False),
     TangentialModel("lammps", 3, "LAMMPS gran/hooke/history (shear vector; Coulomb on the total normal force)",
-                    "LAMMPS hooke/history", False, True))}
+                    "LAMMPS hooke/history", False, True, whole_step_dashpots=False))}
 """The one registry of tangential models, by name; every other list of them is made from it. The
 kernels of a model are the module of :mod:`engine.kernels.tangential` named after it."""
 TANGENTIAL_MODELS = tuple(TANGENTIAL)

@@ -34,7 +34,7 @@ def test_periodic_cell_reaches_the_imposed_stress():
     law = ContactLaw(normal_stiffness=1e3, tangential_stiffness=1e3, friction=0.3, damping_ratio=0.7)
     cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(1.0, 2.0), max_strain_rate=0.05)
     sim = Simulation(ParticleState(positions, r), law, cell=cell)
-    sim.run_for(60.0)
+    sim.run_for(80.0)  # the transient is chaotic: at 60 one scheme or the other may still be settling
     c = sim.cell
     area = c.length[0] * c.length[1]
     for axis, target in enumerate((1.0, 2.0)):

@@ -67,4 +67,5 @@ def test_every_model_takes_energy_out_of_random_oblique_impacts_never_puts_it_in
         budget = sim.energy()
         assert after < before
         assert budget.dissipated > 0.0
-        assert abs(budget.balance - before) < 1e-2 * before
+        # second order with GranLab's whole-step dashpots (worst 2e-4 here), first with LAMMPS's (5e-3)
+        assert abs(budget.balance - before) < (1e-3 if TANGENTIAL[model].whole_step_dashpots else 1e-2) * before

@@ -25,10 +25,11 @@ import math
 
 from numba import literal_unroll, literally, njit, prange, uint64
 
-from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_STICK
 from . import tangential
 from .jit import KERNEL, PARALLEL
-from .laws import D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force, normal_elastic, rolling
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force, normal_elastic, rolling,
+                   touching)
 from .tangential import CODES as TANGENTIAL_CODES, RowGeometry
 
 # per-chunk scalar tallies
@@ -46,7 +47,7 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
     without doing work when a contact opens, it is tallied as dissipated.
     """
     released = 0.0
-    if status[k] == STATUS_STICK or status[k] == STATUS_SLIDE_POS or status[k] == STATUS_SLIDE_NEG:
+    if touching(status[k]):
         released = 0.5 * kt * tangential_spring[k] ** 2 + 0.5 * kr * rolling_spring[k] ** 2
     status[k] = STATUS_NONE
     tangential_spring[k] = 0.0
@@ -54,6 +55,35 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
     normal_force[k] = 0.0
     tangential_force[k] = 0.0
     return released
+
+
+@njit(**KERNEL)
+def dashpot_share(overlap, vn, dt, fresh):
+    """The share of the step's window ``[t - dt/2, t + dt/2]`` the contact spends touching,
+    estimated from its overlap and normal velocity, by which its normal dashpot is multiplied.
+
+    Velocity Verlet applies the force of step t over that window. The spring's force vanishes
+    where a contact begins and ends, the dashpot's does not: applied over whole windows, it
+    starts and stops up to dt/2 early or late, a first-order error. A fresh contact began
+    ``overlap / -V_n`` ago, and what of that lies in the window before (which had no force) is
+    added here; a separating one opens in ``overlap / V_n``, and only what lies in this window
+    counts (the rest is :func:`opened_dashpot_share`'s, at the next step).
+    """
+    share = 1.0
+    if fresh and vn < 0.0 and overlap < -vn * dt:
+        share = overlap / (-vn * dt) + 0.5
+    if vn > 0.0 and overlap < 0.5 * vn * dt:
+        share += overlap / (vn * dt) - 0.5
+    return share
+
+
+@njit(**KERNEL)
+def opened_dashpot_share(gap, vn, dt):
+    """For a contact that opened since the step before: the share of this step's window before
+    it opened, ``gap / V_n`` ago (see :func:`dashpot_share`)."""
+    if vn > 0.0 and gap < 0.5 * vn * dt:
+        return 0.5 - gap / (vn * dt)
+    return 0.0
 
 
 @njit(**KERNEL)
@@ -101,6 +131,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     velocity = p.velocity
     angle = p.angle
     omega = p.omega
+    predicted_velocity = p.predicted_velocity
+    predicted_omega = p.predicted_omega
     radius = p.radius
     inv_inertia = p.inv_inertia
     wall_normal = w.normal
@@ -166,7 +198,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             ry = position[i, 1] - position[j, 1] - image[k, 1] * length_y
             r2 = rx * rx + ry * ry
             reach = ri + rj + d0
-            if r2 >= reach * reach:
+            if r2 >= reach * reach and not touching(status[k]):
                 if status[k] != STATUS_NONE:
                     opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
                                       tangential_force, kt, kr)
@@ -192,7 +224,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             ny = wall_normal[wall, 1]
             dist = nx * position[i, 0] + ny * position[i, 1] - wall_offset[wall]
             gap = dist - ri
-            if gap >= d0:
+            if gap >= d0 and not touching(status[k]):
                 if status[k] != STATUS_NONE:
                     opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
                                       tangential_force, kt, kr)
@@ -214,6 +246,27 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         ty = nx
         vn = dvx * nx + dvy * ny
         vt = dvx * tx + dvy * ty
+        whole_step = tangential.whole_step_dashpots(tangential_model)
+        if whole_step:
+            # the dashpots take the velocities predicted at the whole step, where the springs'
+            # forces are: second order (the half-step ones lag by dt/2)
+            pvx = predicted_velocity[i, 0] - wall_vx
+            pvy = predicted_velocity[i, 1] - wall_vy
+            spin_d = ri * predicted_omega[i]
+            relative_spin_d = predicted_omega[i]
+            if not is_wall:
+                pvx += strain_x * rx - predicted_velocity[j, 0]
+                pvy += strain_y * ry - predicted_velocity[j, 1]
+                spin_d += rj * predicted_omega[j]
+                relative_spin_d -= predicted_omega[j]
+            vn_d = pvx * nx + pvy * ny
+            vt_d = pvx * tx + pvy * ty
+        else:
+            vn_d = vn
+            vt_d = vt
+            spin_d = spin_sum
+            relative_spin_d = relative_spin
+        eta = eta_factor * root_reduced_mass[k]
         ft = 0.0
         moment = 0.0
         if gap < 0.0:
@@ -223,10 +276,10 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 overlapping += 1
                 max_overlap = max(max_overlap, overlap / limit_radius)
             ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
-            eta = eta_factor * root_reduced_mass[k]
-            fn = ne - eta * vn + cohesion_force(f0, d0, gap)
-            damping += eta * vn * vn * dt
             fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
+            share = dashpot_share(overlap, vn_d, dt, fresh) if whole_step else 1.0
+            fn = ne - share * eta * vn_d + cohesion_force(f0, d0, gap)
+            damping += share * eta * vn_d * vn_d * dt
             if fresh:
                 phi = math.atan2(ny, nx)
                 anchor_i[k] = phi + math.pi - angle[i]
@@ -241,9 +294,10 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
             previous = 0.0 if fresh else tangential_spring[k]
             trial = tangential.trial_spring(tangential_model, previous, rate, dt, fresh, row)
-            spring, ft, state, slip = tangential.limit(tangential_model, kt, mu, gamma_t, ne, fn, trial, rate)
+            rate_d = tangential.spring_rate(tangential_model, vt_d, spin_d, alpha)
+            spring, ft, state, slip = tangential.limit(tangential_model, kt, mu, gamma_t, ne, fn, trial, rate_d)
             # the viscous part of F_t, F_t + K_t D_t, does work (zero while a GranLab spring slides)
-            damping -= (ft + kt * spring) * rate * dt
+            damping -= (ft + kt * spring) * rate_d * dt
             if state != STATUS_STICK:
                 # the elastic force of the step before and of this one, averaged as velocity
                 # Verlet averages them in the kinetic energy: first-order errors cancel
@@ -259,20 +313,26 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
                 inv_reduced = inv_inertia[i] + (0.0 if is_wall else inv_inertia[j])
                 if gamma_r_factor > 0.0 and inv_reduced > 0.0:
                     gamma_r = gamma_r_factor / math.sqrt(inv_reduced)
-                roll, moment, roll_slip = rolling(kr, mu_r, gamma_r, ne, roll_trial, relative_spin)
+                roll, moment, roll_slip = rolling(kr, mu_r, gamma_r, ne, roll_trial, relative_spin_d)
                 if roll_slip == 0.0:
-                    damping -= (moment + kr * roll) * relative_spin * dt
+                    damping -= (moment + kr * roll) * relative_spin_d * dt
                 rolling_loss += 0.5 * kr * (previous_roll + roll) * roll_slip
                 rolling_spring[k] = roll
-        elif f0 > 0.0:
-            opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
-                              kt, kr)
-            fn = cohesion_force(f0, d0, gap)
-            status[k] = STATUS_COHESIVE
         else:
+            fn = 0.0
+            if whole_step and touching(status[k]):
+                share = opened_dashpot_share(gap, vn_d, dt)
+                fn = -share * eta * vn_d
+                damping += share * eta * vn_d * vn_d * dt
             opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
                               kt, kr)
-            continue
+            if f0 > 0.0 and gap < d0:
+                fn += cohesion_force(f0, d0, gap)
+                status[k] = STATUS_COHESIVE
+            elif fn == 0.0:
+                if store:
+                    surface_gap[k] = gap
+                continue
         if store:
             normal_force[k] = fn
             tangential_force[k] = ft

@@ -65,7 +65,9 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
     - ``kicks`` half kicks ``v += half f/m``, ``w += half tau/I`` (dynamic disks only; without
       ``gather`` with the stored forces): the second half kick of a step and the first of the
       next are two additions, exactly as when a run stops and resumes between them;
-    - drift ``x = x scale + drift v``, ``theta += drift w`` (every disk).
+    - drift ``x = x scale + drift v``, ``theta += drift w`` (every disk);
+    - the velocities predicted at the next whole step, ``v + half f/m`` after the kicks, for the
+      dashpots of the next contact pass (prescribed velocities as they are).
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
     distance of a disk from its neighbour-list ``reference``, the number of non-finite disks,
@@ -116,6 +118,8 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     torque = p.torque
     external_force = p.external_force
     external_torque = p.external_torque
+    predicted_velocity = p.predicted_velocity
+    predicted_omega = p.predicted_omega
     gx = gravity[0]
     gy = gravity[1]
     work_dt = 2.0 * half
@@ -182,13 +186,21 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
             fy = force[i, 1]
             tq = torque[i]
         if im > 0.0:
+            ii = inv_inertia[i]
             for _ in range(kicks):
                 vx += half * fx * im
                 vy += half * fy * im
-                w += half * tq * inv_inertia[i]
+                w += half * tq * ii
             velocity[i, 0] = vx
             velocity[i, 1] = vy
             omega[i] = w
+            predicted_velocity[i, 0] = vx + half * fx * im
+            predicted_velocity[i, 1] = vy + half * fy * im
+            predicted_omega[i] = w + half * tq * ii
+        else:
+            predicted_velocity[i, 0] = vx
+            predicted_velocity[i, 1] = vy
+            predicted_omega[i] = w
         x = x * scale_x + drift * vx
         y = y * scale_y + drift * vy
         position[i, 0] = x

@@ -32,6 +32,12 @@ _GL_WEIGHTS = (0.05061426814518813, 0.11119051722668724, 0.15685332293894363, 0.
 
 
 @njit(**KERNEL)
+def touching(status):
+    """Whether a row of this status is a contact, sticking or sliding (not a distant attraction)."""
+    return status == STATUS_STICK or status == STATUS_SLIDE_POS or status == STATUS_SLIDE_NEG
+
+
+@njit(**KERNEL)
 def wrap_angle(x):
     """``x`` brought into [-pi, pi)."""
     return x - TWO_PI * math.floor((x + math.pi) / TWO_PI)

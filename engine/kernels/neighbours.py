@@ -12,9 +12,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from ..state import STATUS_NONE
 from .jit import JIT
-from .laws import root_reduced_mass
+from .laws import root_reduced_mass, touching
 
 MAX_CELLS_PER_PARTICLE = 4
 
@@ -159,11 +159,6 @@ def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_
 
 
 @njit(**JIT)
-def _touching(status):
-    return status == STATUS_STICK or status == STATUS_SLIDE_POS or status == STATUS_SLIDE_NEG
-
-
-@njit(**JIT)
 def _transfer_history(old, new, wraps, length, wall_normal, n):
     """Copy each old row's history to the new row of the same pair and image.
 
@@ -182,7 +177,7 @@ def _transfer_history(old, new, wraps, length, wall_normal, n):
     matched = 0
     active = 0
     for k in range(old_count):
-        if _touching(old.status[k]):
+        if touching(old.status[k]):
             active += 1
     for k in range(new.count[0]):
         i = new.particle_i[k]
@@ -208,7 +203,7 @@ def _transfer_history(old, new, wraps, length, wall_normal, n):
             new.tangential_force[k] = 0.0
             new.surface_gap[k] = math.inf
             continue
-        if _touching(old.status[found]):
+        if touching(old.status[found]):
             matched += 1
         new.status[k] = old.status[found]
         new.tangential_spring[k] = old.tangential_spring[found]

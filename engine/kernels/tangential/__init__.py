@@ -11,6 +11,9 @@ A model module holds four small kernels, which the one contact loop calls for ea
   limit, given the elastic ``ne`` and total ``fn`` normal forces;
 - ``centre_factor(alpha)``: what ``F_t`` is multiplied by on the centres (its moment is ``-r F_t``).
 
+Whether the dashpots (normal, tangential, rolling) take the velocities predicted at the whole step
+or the half-step ones is the registry's ``whole_step_dashpots``.
+
 The functions below dispatch on a model code known when the contact loop is compiled (a literal):
 each model gets its own loop, with its laws inlined, and nothing is decided per row. Adding a model
 is its module here and its line in the registry.
@@ -32,6 +35,7 @@ angles and anchors (for a wall, ``anchor_j`` is along the wall and ``angle_j = 0
 disk i and how far the wall has slid along itself."""
 
 MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for model in TANGENTIAL.values()}
+_WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGENTIAL.values()}
 CODES = tuple(sorted(MODELS))
 """The codes the contact loop is compiled for, one loop each."""
 
@@ -56,6 +60,10 @@ def limit(model, kt, mu, gamma_t, ne, fn, trial, rate):
 
 def centre_factor(model, alpha):
     """The factor of ``F_t`` on the centres."""
+
+
+def whole_step_dashpots(model):
+    """Whether the dashpots take the velocities predicted at the whole step."""
 
 
 @overload(spring_rate, prefer_literal=True)
@@ -88,3 +96,10 @@ def _centre_factor(model, alpha):
     if law is not None:
         impl = law.centre_factor
         return lambda model, alpha: impl(alpha)
+
+
+@overload(whole_step_dashpots, prefer_literal=True)
+def _whole_step_dashpots(model):
+    if isinstance(model, types.IntegerLiteral):
+        flag = _WHOLE_STEP_DASHPOTS[model.literal_value]
+        return lambda model: flag

@@ -9,7 +9,8 @@ integrates it, so that a LAMMPS run can be reproduced step for step.
   (and here cohesion) included, where GranLab's own models limit by the elastic part ``N^e``
   (Gilabert Eq. 8). On sliding LAMMPS rescales the elastic and viscous parts together:
   ``D_t = ratio (D_t + Gamma_t V_t / K_t) - Gamma_t V_t / K_t``.
-- The dashpots use the half-step velocities, as LAMMPS's velocity-Verlet does.
+- The dashpots use the half-step velocities, as LAMMPS's velocity-Verlet does (the registry's
+  ``whole_step_dashpots=False``): first order in dt where damping acts.
 
 LAMMPS's ``m_eff gamma_n`` is GranLab's ``eta = 2 zeta sqrt(K_n m_eff)`` and its ``m_eff gamma_t``
 is ``Gamma_t``: equal for one pair of masses (a collision), not across a polydisperse packing.
