@@ -144,6 +144,55 @@ def scaling(sides=SCALING_SIDES, steps: int = SCALING_STEPS) -> dict:
             "worst_over_best": max(row["ns_per_particle_step"] for row in rows) / best}
 
 
+def _best_seconds(call, repeats: int) -> float:
+    """The fastest of five timings of ``repeats`` calls of ``call``, per call."""
+    call()
+    runs = []
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(repeats):
+            call()
+        runs.append((time.perf_counter() - start) / repeats)
+    return min(runs)
+
+
+def profile(side: int = 100, steps: int = 1000) -> dict:
+    """Where a particle-step of the reference system goes, on one thread: the whole step (``steps``
+    steps in one call), the contact pass alone (per row of the contact table) and the pass over
+    the disks alone (per disk, gathering the force buffers, two kicks and a drift of zero length,
+    so the state does not change), the rest (walls, cell, tallies, checks) by difference, and one
+    rebuild of the contact table (in steps)."""
+    from .kernels import contacts, integrate
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        sim = reference_system(side)
+        sim.run(WARMUP_STEPS)
+        step = _best_seconds(lambda: sim.run(steps), 1) / steps
+        p, w, cell, ct, ws = (sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(),
+                              sim.workspace)
+        repeats = max(1, steps // 10)
+        contact_pass = _best_seconds(lambda: contacts.contact_forces(
+            p, w, cell, ct, sim._law_vector, sim.normal_model_code, sim.tangential_model_code, sim.dt,
+            sim.integration.max_overlap,
+            False, 1, ws.force_buffer, ws.wall_buffer, ws.tally_buffer), repeats)
+        particle_pass = _best_seconds(lambda: integrate.particle_pass(
+            p, ws.force_buffer, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
+            ws.partial_gather, ws.gather), repeats)
+        one_rebuild = rebuild_seconds(sim)
+    finally:
+        numba.set_num_threads(previous)
+    n, rows = sim.particles.count, sim.contacts.count
+    ns = 1e9 / n
+    return {"system": f"lammps_reference.in: {n} disks, Cundall-Strack, dt=0.001, 1 thread", "particles": n,
+            "rows": rows, "rows_per_disk": rows / n, "ns_per_particle_step": step * ns,
+            "contact_pass_ns_per_disk": contact_pass * ns, "contact_pass_ns_per_row": contact_pass * 1e9 / rows,
+            "particle_pass_ns_per_disk": particle_pass * ns,
+            "other_ns_per_disk": (step - contact_pass - particle_pass) * ns,
+            "rebuild_in_steps": one_rebuild / step}
+
+
 ANALYSIS_PARTICLES = 5600
 
 

@@ -192,10 +192,28 @@ def _bench(args) -> dict:
         raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {steps} and {args.side}")
     if args.scaling:
         return bench.scaling(steps=steps)
+    if args.profile:
+        return bench.profile(args.side, args.steps or 1000)
     return bench.run(steps, args.side)
 
 
 def _print_bench(result: dict) -> None:
+    if "contact_pass_ns_per_row" in result:
+        step = result["ns_per_particle_step"]
+        print(result["system"])
+        print(f"  a particle-step: {step:.1f} ns ({1e3 / step:.1f} M particle-steps/s)")
+        print(f"  contact pass:    {result['contact_pass_ns_per_disk']:.1f} ns per disk "
+              f"({result['rows_per_disk']:.2f} rows per disk, {result['contact_pass_ns_per_row']:.1f} ns per row), "
+              f"{100 * result['contact_pass_ns_per_disk'] / step:.0f} %")
+        print(f"  particle pass:   {result['particle_pass_ns_per_disk']:.1f} ns per disk, "
+              f"{100 * result['particle_pass_ns_per_disk'] / step:.0f} %")
+        if result["other_ns_per_disk"] > 0:
+            print(f"  the rest:        {result['other_ns_per_disk']:.1f} ns per disk (walls, cell, tallies, checks), "
+                  f"{100 * result['other_ns_per_disk'] / step:.0f} %")
+        else:
+            print("  the rest:        below the noise (the two passes timed apart take longer than in a step)")
+        print(f"  one rebuild of the contact table: {result['rebuild_in_steps']:.1f} steps")
+        return
     if "sizes" in result:
         print(result["system"])
         print(f"  {'disks':>9} {'steps':>6} {'M particle-steps/s':>19} {'ns/particle-step':>17} {'bytes/disk':>11} "
@@ -448,6 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--scaling", action="store_true",
                        help="the reference system at 10^3, 10^4, 10^5 and 10^6 disks on one thread: particle-steps "
                             "per second, bytes per disk and the share of rebuilds at each size (a minute or two)")
+    bench.add_argument("--profile", action="store_true",
+                       help="where a particle-step goes on one thread: contact pass per row, pass over the disks, "
+                            "the rest, a rebuild")
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
     bench.add_argument("--analysis", metavar="PACKING.h5",
                        help="time every analysis of 'granlab analyze' on this packing instead (prepared there by "

@@ -72,6 +72,13 @@ def test_experiment_json_keys():
     assert block["friction_work_positive"] is False
 
 
+def test_bench_profile_splits_a_particle_step_between_the_passes():
+    result = json.loads(granlab("bench", "--profile", "--side", "10", "--steps", "100", "--json").stdout)
+    assert result["rows_per_disk"] == pytest.approx(2.0)
+    assert result["contact_pass_ns_per_row"] > 0 and result["particle_pass_ns_per_disk"] > 0
+    assert result["contact_pass_ns_per_disk"] == pytest.approx(2.0 * result["contact_pass_ns_per_row"])
+
+
 def test_bench_json_keys_on_a_small_system():
     result = json.loads(granlab("bench", "--side", "10", "--steps", "50", "--json").stdout)
     assert result["particle_steps_per_s_1thread"] > 0 and result["particle_steps_per_s_all"] > 0
