@@ -3,10 +3,10 @@
 10 000 disks of diameter 1.02 on a unit square lattice in a periodic 100 × 100
 box, unit mass, disc inertia, ``K_n = 1000``, ``K_t = 2 K_n / 7``, normal damping
 ``gamma_n = 50`` in LAMMPS's mass-velocity form (``eta = m_eff gamma_n``, so
-``zeta = m_eff gamma_n / (2 sqrt(K_n m_eff))``) and tangential damping
-``gamma_t = gamma_n / 2`` (``Gamma_t = m_eff gamma_t``), ``mu = 0.5``, ``dt = 0.001``,
-random velocities of temperature 0.01; every disk touches its 4 neighbours
-(2 contacts per disk). The Cundall-Strack law, as ``pair gran/hooke/history``.
+``zeta = m_eff gamma_n / (2 sqrt(K_n m_eff))``), no tangential damping (the input's
+``dampflag = 0``), ``mu = 0.5``, ``dt = 0.001``, random velocities of temperature 0.01;
+every disk touches its 4 neighbours (2 contacts per disk). GranLab's Cundall-Strack law by
+default; ``model="lammps"`` integrates it as LAMMPS does (half-step dashpots, Coulomb on F_n).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ WARMUP_STEPS = 100
 TIMED_STEPS = 5000
 
 
-def reference_system(side: int = 100, seed: int = 4928459) -> Simulation:
-    """The LAMMPS reference system with ``side²`` disks (``side = 100``: 10 000)."""
+def reference_system(side: int = 100, seed: int = 4928459, model: str = "cundall-strack") -> Simulation:
+    """The LAMMPS reference system with ``side²`` disks (``side = 100``: 10 000), tangential ``model``."""
     grid = np.arange(side, dtype=np.float64)
     x, y = np.meshgrid(grid, grid, indexing="xy")
     positions = np.column_stack([x.ravel(), y.ravel()])
@@ -41,18 +41,17 @@ def reference_system(side: int = 100, seed: int = 4928459) -> Simulation:
     gamma_n = 50.0
     kn = 1000.0
     law = ContactLaw(normal_stiffness=kn, tangential_stiffness=2.0 * kn / 7.0, friction=0.5,
-                     damping_ratio=m_eff * gamma_n / (2.0 * math.sqrt(kn * m_eff)),
-                     tangential_damping=m_eff * 0.5 * gamma_n, tangential_model="cundall-strack")
+                     damping_ratio=m_eff * gamma_n / (2.0 * math.sqrt(kn * m_eff)), tangential_model=model)
     integration = Integration(dt=0.001, skin=0.1)
     return Simulation(particles, law, integration, cell=PeriodicCell(lengths=(float(side), float(side))))
 
 
-def measure(threads: int, steps: int = TIMED_STEPS, side: int = 100) -> dict:
+def measure(threads: int, steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
     """Particle-steps per second of the reference system on ``threads`` threads."""
     previous = numba.get_num_threads()
     numba.set_num_threads(threads)
     try:
-        sim = reference_system(side)
+        sim = reference_system(side, model=model)
         sim.run(WARMUP_STEPS)
         start = time.perf_counter()
         sim.run(steps)
@@ -65,13 +64,13 @@ def measure(threads: int, steps: int = TIMED_STEPS, side: int = 100) -> dict:
             "contacts_per_disk": sim.contact_snapshot().count / n}
 
 
-def run(steps: int = TIMED_STEPS, side: int = 100) -> dict:
+def run(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
     """Measure on one thread and on all threads (``side`` < 100: a smaller system, for tests)."""
-    one = measure(1, steps, side)
+    one = measure(1, steps, side, model)
     every = numba.config.NUMBA_NUM_THREADS
-    allt = measure(every, steps, side)
+    allt = measure(every, steps, side, model)
     return {
-        "system": f"lammps_reference.in: {side * side} disks, periodic {side}x{side}, Cundall-Strack, dt=0.001",
+        "system": f"lammps_reference.in: {side * side} disks, periodic {side}x{side}, {model}, dt=0.001",
         "particle_steps_per_s_1thread": one["particle_steps_per_s"],
         "particle_steps_per_s_all": allt["particle_steps_per_s"],
         "threads_all": every,

@@ -194,7 +194,7 @@ def _bench(args) -> dict:
         return bench.scaling(steps=steps)
     if args.profile:
         return bench.profile(args.side, args.steps or 1000)
-    return bench.run(steps, args.side)
+    return bench.run(steps, args.side, args.model)
 
 
 def _print_bench(result: dict) -> None:
@@ -466,6 +466,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--scaling", action="store_true",
                        help="the reference system at 10^3, 10^4, 10^5 and 10^6 disks on one thread: particle-steps "
                             "per second, bytes per disk and the share of rebuilds at each size (a minute or two)")
+    bench.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS,
+                       help="tangential model (lammps: integrated as LAMMPS does it)")
     bench.add_argument("--profile", action="store_true",
                        help="where a particle-step goes on one thread: contact pass per row, pass over the disks, "
                             "the rest, a rebuild")

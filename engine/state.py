@@ -36,7 +36,7 @@ STATUS_NAMES = ("none", "non-sliding", "sliding+", "sliding-", "cohesive")
 ParticleArrays = namedtuple(
     "ParticleArrays",
     "position velocity angle omega radius mass inv_mass inv_inertia force torque external_force external_torque "
-    "predicted_velocity predicted_omega",
+    "predicted_motion",
 )
 WallArrays = namedtuple(
     "WallArrays",
@@ -106,10 +106,11 @@ class ParticleState(_Copyable):
     ``density × pi r²`` from an areal density, default 1), ``inertia (N,)`` (given, or the
     disc's ``I = m r² / 2``; ``inf`` makes a disk that never turns), ``kind (N,) int8`` (dynamic, fixed,
     kinematic), ``force (N, 2)`` and ``torque (N,)`` of the last step,
-    ``external_force (N, 2)`` and ``external_torque (N,)`` applied loads. ``predicted_velocity
-    (N, 2)`` and ``predicted_omega (N,)``, written by every pass of the step driver, are the
-    velocities predicted at the next whole step, ``v + dt/2 f/m`` (the dashpots' velocities); they
-    follow from the velocities and forces at a whole step, so a checkpoint need not keep them.
+    ``external_force (N, 2)`` and ``external_torque (N,)`` applied loads. ``predicted_motion
+    (N, 3)``, written by every pass of the step driver, holds the velocity and spin predicted at
+    the next whole step, ``v + dt/2 f/m`` and ``w + dt/2 tau/I`` (the dashpots' velocities; one
+    row per disk, so the contact loop reads them in one go); they follow from the velocities and
+    forces at a whole step, so a checkpoint need not keep them.
 
     Fixed and kinematic disks keep their prescribed velocity and spin: their
     inverse mass and inertia are zero.
@@ -158,8 +159,7 @@ class ParticleState(_Copyable):
         self.torque = np.zeros(n)
         self.external_force = np.zeros((n, 2))
         self.external_torque = np.zeros(n)
-        self.predicted_velocity = np.zeros((n, 2))
-        self.predicted_omega = np.zeros(n)
+        self.predicted_motion = np.zeros((n, 3))
 
     @property
     def count(self) -> int:
@@ -196,8 +196,7 @@ class ParticleState(_Copyable):
     def arrays(self) -> ParticleArrays:
         return ParticleArrays(self.position, self.velocity, self.angle, self.omega, self.radius, self.mass,
                               self.inv_mass, self.inv_inertia, self.force, self.torque,
-                              self.external_force, self.external_torque, self.predicted_velocity,
-                              self.predicted_omega)
+                              self.external_force, self.external_torque, self.predicted_motion)
 
 
 class WallState(_Copyable):

@@ -70,9 +70,10 @@ def dashpot_share(overlap, vn, dt, fresh):
     counts (the rest is :func:`opened_dashpot_share`'s, at the next step).
     """
     share = 1.0
-    if fresh and vn < 0.0 and overlap < -vn * dt:
+    # V_n's sign flips at random in a packing at rest: each test below is one predictable branch
+    if fresh and overlap < -min(vn, 0.0) * dt:
         share = overlap / (-vn * dt) + 0.5
-    if vn > 0.0 and overlap < 0.5 * vn * dt:
+    if overlap < 0.5 * max(vn, 0.0) * dt:
         share += overlap / (vn * dt) - 0.5
     return share
 
@@ -131,8 +132,7 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     velocity = p.velocity
     angle = p.angle
     omega = p.omega
-    predicted_velocity = p.predicted_velocity
-    predicted_omega = p.predicted_omega
+    predicted = p.predicted_motion
     radius = p.radius
     inv_inertia = p.inv_inertia
     wall_normal = w.normal
@@ -250,15 +250,15 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         if whole_step:
             # the dashpots take the velocities predicted at the whole step, where the springs'
             # forces are: second order (the half-step ones lag by dt/2)
-            pvx = predicted_velocity[i, 0] - wall_vx
-            pvy = predicted_velocity[i, 1] - wall_vy
-            spin_d = ri * predicted_omega[i]
-            relative_spin_d = predicted_omega[i]
+            pvx = predicted[i, 0] - wall_vx
+            pvy = predicted[i, 1] - wall_vy
+            spin_d = ri * predicted[i, 2]
+            relative_spin_d = predicted[i, 2]
             if not is_wall:
-                pvx += strain_x * rx - predicted_velocity[j, 0]
-                pvy += strain_y * ry - predicted_velocity[j, 1]
-                spin_d += rj * predicted_omega[j]
-                relative_spin_d -= predicted_omega[j]
+                pvx += strain_x * rx - predicted[j, 0]
+                pvy += strain_y * ry - predicted[j, 1]
+                spin_d += rj * predicted[j, 2]
+                relative_spin_d -= predicted[j, 2]
             vn_d = pvx * nx + pvy * ny
             vt_d = pvx * tx + pvy * ty
         else:

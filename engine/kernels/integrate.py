@@ -118,8 +118,7 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
     torque = p.torque
     external_force = p.external_force
     external_torque = p.external_torque
-    predicted_velocity = p.predicted_velocity
-    predicted_omega = p.predicted_omega
+    predicted = p.predicted_motion
     gx = gravity[0]
     gy = gravity[1]
     work_dt = 2.0 * half
@@ -194,13 +193,13 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
             velocity[i, 0] = vx
             velocity[i, 1] = vy
             omega[i] = w
-            predicted_velocity[i, 0] = vx + half * fx * im
-            predicted_velocity[i, 1] = vy + half * fy * im
-            predicted_omega[i] = w + half * tq * ii
+            predicted[i, 0] = vx + half * fx * im
+            predicted[i, 1] = vy + half * fy * im
+            predicted[i, 2] = w + half * tq * ii
         else:
-            predicted_velocity[i, 0] = vx
-            predicted_velocity[i, 1] = vy
-            predicted_omega[i] = w
+            predicted[i, 0] = vx
+            predicted[i, 1] = vy
+            predicted[i, 2] = w
         x = x * scale_x + drift * vx
         y = y * scale_y + drift * vy
         position[i, 0] = x
