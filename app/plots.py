@@ -130,7 +130,7 @@ def _stream(source: ColumnDataSource, columns: dict, reset: bool, rollover: int)
 
 
 class LinePlot(LivePlot):
-    """Lines of one series: ``lines`` is a list of (x column, y column, legend label, colour)."""
+    """Lines of one series: ``lines`` is a list of (x column, y column, legend label, colour[, dash])."""
 
     def __init__(self, name, title, series, lines, x_label, y_label, columns, **kwargs):
         super().__init__(name, lab_figure(name, title, x_label, y_label, **kwargs))
@@ -138,9 +138,10 @@ class LinePlot(LivePlot):
         self.source = ColumnDataSource(_empty(columns), name=f"series-{name}")
         self.sources = [self.source]
         self.lines = lines
-        for x, y, label, color in lines:
+        for x, y, label, color, *dash in lines:
             options = {"legend_label": label} if len(lines) > 1 else {}
-            self.figure.line(x, y, source=self.source, color=color, line_width=2, **options)
+            self.figure.line(x, y, source=self.source, color=color, line_width=2, line_dash=dash[0] if dash else "solid",
+                             **options)
         if len(lines) > 1:
             legend_above(self.figure)
 
@@ -400,6 +401,9 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
 
 MODEL_COLORS = dict(zip(TANGENTIAL, ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")))
 """One colour per tangential model, in the registry's order, in every plot that compares them."""
+MODEL_DASHES = dict(zip(TANGENTIAL, ("solid", "solid", "dashed", "dashed", "dotted", "dotdash")))
+"""The line of each model: the angle spring's lies on the α-corrected one and LAMMPS's on
+Cundall–Strack's, so the later of each pair is dashed and the earlier shows through."""
 
 LINES = {
     "energy": {"title": "Energy budget", "series": "time", "y": "energy (paper units)",
@@ -410,10 +414,11 @@ LINES = {
                      "lines": [("t", "z", "z", "#1f77b4")]},
     "springs": {"title": "Spring D_t of each tangential model (ratcheting Fig. 9)", "series": "springs",
                 "y": "D_t (length, paper units)",
-                "lines": [("t", f"dt_{m.key}", m.label, MODEL_COLORS[m.name]) for m in TANGENTIAL.values()]},
+                "lines": [("t", f"dt_{m.key}", m.label, MODEL_COLORS[m.name], MODEL_DASHES[m.name])
+                          for m in TANGENTIAL.values()]},
     "spring-path": {"title": "(D_t, D_n) along the closed path A→B→C→D→A", "series": "springs",
                     "x": "D_t (length, paper units)", "y": "D_n (gap, < 0: overlap)",
-                    "lines": [(f"dt_{m.key}", f"dn_{m.key}", m.label, MODEL_COLORS[m.name])
+                    "lines": [(f"dt_{m.key}", f"dn_{m.key}", m.label, MODEL_COLORS[m.name], MODEL_DASHES[m.name])
                               for m in TANGENTIAL.values()]},
     "block-load": {"title": "Sideways load and the block's velocity", "series": "block",
                    "y": "load / μF_n;  velocity (paper units)",
