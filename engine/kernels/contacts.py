@@ -58,6 +58,36 @@ def forget(k, status, tangential_spring, rolling_spring, normal_force, tangentia
 
 
 @njit(**KERNEL)
+def predicted_relative_motion(predicted, i, j, is_wall, wall_vx, wall_vy, affine_x, affine_y, nx, ny, ri, rj):
+    """The dashpots' velocities of a row: ``(V_n, V_t, r_i w_i + r_j w_j, w_i - w_j)`` from the
+    velocities and spins predicted at the whole step, where the springs' forces are (second
+    order; the half-step ones lag by dt/2). ``affine``: the cell's affine velocity of ``r``."""
+    vx = predicted[i, 0] - wall_vx
+    vy = predicted[i, 1] - wall_vy
+    spin_sum = ri * predicted[i, 2]
+    relative_spin = predicted[i, 2]
+    if not is_wall:
+        vx += affine_x - predicted[j, 0]
+        vy += affine_y - predicted[j, 1]
+        spin_sum += rj * predicted[j, 2]
+        relative_spin -= predicted[j, 2]
+    return vx * nx + vy * ny, vy * nx - vx * ny, spin_sum, relative_spin
+
+
+@njit(**KERNEL)
+def rolling_step(kr, mu_r, gamma_r_factor, inv_reduced, ne, previous, relative_spin, relative_spin_d, dt):
+    """The rolling spring of a contact over one step (Gilabert Eq. 10): its relative rotation
+    advanced by the half-step spins, its dashpot on the whole-step ones. Returns the spring, the
+    moment on disk i, the work of the dashpot and the energy the slip lets go."""
+    gamma_r = 0.0
+    if gamma_r_factor > 0.0 and inv_reduced > 0.0:
+        gamma_r = gamma_r_factor / math.sqrt(inv_reduced)
+    roll, moment, slip = rolling(kr, mu_r, gamma_r, ne, previous + relative_spin * dt, relative_spin_d)
+    viscous_work = -(moment + kr * roll) * relative_spin_d * dt if slip == 0.0 else 0.0
+    return roll, moment, viscous_work, 0.5 * kr * (previous + roll) * slip
+
+
+@njit(**KERNEL)
 def dashpot_share(overlap, vn, dt, fresh):
     """The share of the step's window ``[t - dt/2, t + dt/2]`` the contact spends touching,
     estimated from its overlap and normal velocity, by which its normal dashpot is multiplied.
@@ -248,19 +278,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         vt = dvx * tx + dvy * ty
         whole_step = tangential.whole_step_dashpots(tangential_model)
         if whole_step:
-            # the dashpots take the velocities predicted at the whole step, where the springs'
-            # forces are: second order (the half-step ones lag by dt/2)
-            pvx = predicted[i, 0] - wall_vx
-            pvy = predicted[i, 1] - wall_vy
-            spin_d = ri * predicted[i, 2]
-            relative_spin_d = predicted[i, 2]
-            if not is_wall:
-                pvx += strain_x * rx - predicted[j, 0]
-                pvy += strain_y * ry - predicted[j, 1]
-                spin_d += rj * predicted[j, 2]
-                relative_spin_d -= predicted[j, 2]
-            vn_d = pvx * nx + pvy * ny
-            vt_d = pvx * tx + pvy * ty
+            vn_d, vt_d, spin_d, relative_spin_d = predicted_relative_motion(
+                predicted, i, j, is_wall, wall_vx, wall_vy, strain_x * rx, strain_y * ry, nx, ny, ri, rj)
         else:
             vn_d = vn
             vt_d = vt
@@ -308,15 +327,11 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             status[k] = state
             if kr > 0.0:
                 previous_roll = 0.0 if fresh else rolling_spring[k]
-                roll_trial = previous_roll + relative_spin * dt
-                gamma_r = 0.0
                 inv_reduced = inv_inertia[i] + (0.0 if is_wall else inv_inertia[j])
-                if gamma_r_factor > 0.0 and inv_reduced > 0.0:
-                    gamma_r = gamma_r_factor / math.sqrt(inv_reduced)
-                roll, moment, roll_slip = rolling(kr, mu_r, gamma_r, ne, roll_trial, relative_spin_d)
-                if roll_slip == 0.0:
-                    damping -= (moment + kr * roll) * relative_spin_d * dt
-                rolling_loss += 0.5 * kr * (previous_roll + roll) * roll_slip
+                roll, moment, viscous_work, slip_loss = rolling_step(kr, mu_r, gamma_r_factor, inv_reduced, ne,
+                                                                     previous_roll, relative_spin, relative_spin_d, dt)
+                damping += viscous_work
+                rolling_loss += slip_loss
                 rolling_spring[k] = roll
         else:
             fn = 0.0
