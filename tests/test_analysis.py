@@ -47,7 +47,9 @@ def test_rumpf_relation_on_a_prepared_packing():
     assert sum(stats.coordination) == pytest.approx(1.0)
     assert sum(k * x for k, x in enumerate(stats.coordination)) == pytest.approx(stats.z)
     assert stats.z_star == pytest.approx(stats.z / (1.0 - stats.coordination[0]))
-    assert 0.1 < stats.rattlers / stats.particles < 0.25  # Gilabert: up to 18 % without cohesion
+    # Gilabert: up to 18 % without cohesion. One 150-disk sample: seeds 1-6 give 0.10-0.25 (mean
+    # 0.17), and which end a seed lands at changes with the last bit of the preparation's arithmetic
+    assert 0.05 < stats.rattlers / stats.particles < 0.3
 
 
 def chain_state(forces, periodic=True, walls=False):
