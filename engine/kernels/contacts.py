@@ -199,6 +199,9 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     gamma_r_factor = 2.0 * law[ZETA_R] * math.sqrt(kr)
     eta_factor = 2.0 * law[ZETA] * math.sqrt(kn)
     nw = wall_offset.shape[0]
+    # without a dashpot the dashpots' velocities multiply zero: the half-step ones serve, unread
+    whole_step = tangential.whole_step_dashpots(tangential_model) and (
+        eta_factor > 0.0 or gamma_t > 0.0 or gamma_r_factor > 0.0)
 
     lo = uint64(c * count // n_chunks)
     hi = uint64((c + 1) * count // n_chunks)
@@ -276,7 +279,6 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         ty = nx
         vn = dvx * nx + dvy * ny
         vt = dvx * tx + dvy * ty
-        whole_step = tangential.whole_step_dashpots(tangential_model)
         if whole_step:
             vn_d, vt_d, spin_d, relative_spin_d = predicted_relative_motion(
                 predicted, i, j, is_wall, wall_vx, wall_vy, strain_x * rx, strain_y * ry, nx, ny, ri, rj)
