@@ -8,8 +8,9 @@
   (``--analysis PACKING.h5``: the wall time of every analysis instead);
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
-- ``granlab reproduce {gilabert-method1,gilabert-method2} [--samples S] [--particles N] [--json]``:
-  Gilabert's preparation tables measured on Dask beside the published values;
+- ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N]
+  [--out DIR | --resume DIR] [--json]``: Gilabert's preparation tables measured on Dask beside the
+  published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
@@ -325,21 +326,53 @@ def _print_study(result: dict) -> None:
         print(f"  failed: seed {failure['seed']} ({failure['model']}): {failure['error']}")
 
 
+_REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
+                         "max_time": "--max-time", "rolling_damping_ratio": "--rolling-damping",
+                         "cell_mass_disks": "--cell-mass-disks"}
+
+
 def _reproduce(args) -> dict:
-    from .reproduce import Reproduction, run_reproduction
+    from .reproduce import (PAPER_SIZE, Reproduction, finished_samples, resume_folder, run_reproduction,
+                            start_folder)
     from .studies import text_progress
 
-    reproduction = Reproduction(args.table, particles=args.particles, samples=args.samples, first_seed=args.seed,
-                                max_time=args.max_time, rolling_damping_ratio=args.rolling_damping,
-                                cell_mass_disks=args.cell_mass_disks)
-    return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
-                            progress=None if args.json else text_progress)
+    given = {key: getattr(args, option[2:].replace("-", "_")) for key, option in _REPRODUCTION_OPTIONS.items()}
+    given = {key: value for key, value in given.items() if value is not None}
+    if args.resume:
+        reproduction = resume_folder(args.resume)
+        if reproduction.name != args.table:
+            raise GranLabError(f"{args.resume} holds {reproduction.name}, not {args.table}")
+        if given or args.paper_size:
+            options = [_REPRODUCTION_OPTIONS[key] for key in given] + (["--paper-size"] if args.paper_size else [])
+            raise GranLabError(f"--resume {args.resume} continues with the settings it was started with: "
+                               f"drop {', '.join(options)}")
+        folder = Path(args.resume)
+    else:
+        if args.paper_size:
+            particles, samples = PAPER_SIZE[args.table]
+            given = {"particles": particles, "samples": samples, **given}
+        reproduction = Reproduction(args.table, **given)
+        folder = None if args.out is None else start_folder(args.out, reproduction)
+    try:
+        return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
+                                progress=None if args.json else text_progress, folder=folder)
+    except KeyboardInterrupt:
+        if folder is None:
+            raise
+        total = reproduction.samples * len(reproduction.cases)
+        print(f"\ninterrupted: {len(finished_samples(folder))} of {total} samples are in {folder}; go on with "
+              f"granlab reproduce {args.table} --resume {folder}", file=sys.stderr)
+        raise SystemExit(130) from None
 
 
 def _print_reproduce(result: dict) -> None:
     settings = result["settings"]
     print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case, "
-          f"{result['wall_time_s']:.1f} s on {result['scheduler']}")
+          f"{result['wall_time_s']:.1f} s on {result['scheduler']} (samples' own times: "
+          f"{result['sample_wall_time_s']:.1f} s)")
+    if result["folder"]:
+        print(f"  samples in {result['folder']}" + (f", {result['resumed']} of them from before"
+                                                    if result["resumed"] else ""))
     print(f"    {'quantity':<14}{'measured (mean ± s.e.)':<26}{'published':<24}source")
     for case in result["cases"]:
         zero = case.get("balanced_at_zero_pressure")
@@ -351,6 +384,16 @@ def _print_reproduce(result: dict) -> None:
                 ("" if q["sem"] is None else f" ± {q['sem']:.{digits}f}") + f" (n = {q['n']})"
             ref = q["published"]
             print(f"    {name:<14}{measured:<26}{ref['value']:g} ± {ref['error']:g}".ljust(68) + ref["source"])
+        for stage, fit in case.get("averaged_fit", {}).items():
+            suffix = "_0" if stage == "at_zero_pressure" else ""
+            if fit["error"]:
+                print(f"    d_F{suffix}, xi{suffix} of I(k) averaged over {fit['samples']} samples: {fit['error']}")
+                continue
+            for name, digits in (("d_F", 3), ("xi", 2)):
+                ref = case["quantities"][name + suffix]["published"]
+                measured = f"{fit[name]:.{digits}f} ± {fit[name + '_error']:.{digits}f} (n = {fit['samples']})"
+                print(f"    {name + suffix + ' <I(k)>':<14}{measured:<25} {ref['value']:g} ± {ref['error']:g}".ljust(68)
+                      + ref["source"])
     for failure in result["failed"]:
         print(f"  failed: {failure['case']}, seed {failure['seed']}: {failure['error']}")
 
@@ -528,16 +571,23 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser("reproduce", help="reproduce a paper's table on Dask, beside the published values")
     reproduce.add_argument("table", choices=tuple(REPRODUCTIONS),
                            help="Gilabert et al. method 1 (Tables II, III) or method 2 (Tables IV, V, VII)")
-    reproduce.add_argument("--samples", type=_positive_int, default=2, help="samples per case (default 2)")
-    reproduce.add_argument("--particles", type=_positive_int, default=100, help="disks per sample (default 100)")
-    reproduce.add_argument("--max-time", type=_float, default=500.0,
+    reproduce.add_argument("--paper-size", action="store_true",
+                           help="the paper's size: 1400 disks, 4 samples per case (--particles and --samples "
+                                "still override: --particles 5600 --samples 3 is method 2's larger series)")
+    reproduce.add_argument("--samples", type=_positive_int, help="samples per case (default 2)")
+    reproduce.add_argument("--particles", type=_positive_int, help="disks per sample (default 100)")
+    reproduce.add_argument("--max-time", type=_float,
                            help="simulated-time limit of each preparation stage, in T0 (default 500)")
-    reproduce.add_argument("--rolling-damping", type=_float, default=0.8, metavar="ZETA_R",
-                           help=ROLLING_DAMPING_HELP)
-    reproduce.add_argument("--cell-mass-disks", type=_positive_int, default=1400, metavar="N",
+    reproduce.add_argument("--rolling-damping", type=_float, metavar="ZETA_R", help=ROLLING_DAMPING_HELP)
+    reproduce.add_argument("--cell-mass-disks", type=_positive_int, metavar="N",
                            help="the cell's generalized mass M (Eq. 3) is the paper's for N disks (default 1400, "
                                 "the paper's size: every sample size then compacts at the paper's rate)")
-    reproduce.add_argument("--seed", type=int, default=0, help="first seed")
+    reproduce.add_argument("--seed", type=int, help="first seed (default 0)")
+    folder = reproduce.add_mutually_exclusive_group()
+    folder.add_argument("--out", metavar="DIR", help="write the settings and each sample to DIR as it finishes")
+    folder.add_argument("--resume", metavar="DIR",
+                        help="continue the reproduction in DIR (made by --out): run only the samples not there yet, "
+                             "with DIR's settings")
     reproduce.add_argument("--workers", type=_positive_int, help="local Dask workers (default: one per core)")
     reproduce.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
     reproduce.add_argument("--json", action="store_true", help="print one JSON object")

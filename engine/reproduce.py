@@ -18,20 +18,30 @@ counts, those carrying no force included (Sec. IV A: a quarter of the contacts a
 Units: the largest diameter ``a``, the mass of a disk of diameter ``a`` and ``F0`` (cohesive) or
 ``P a`` (cohesionless), so ``T0 = sqrt(m a / F0) = 1``. Samples run in parallel on Dask
 (:func:`engine.studies.run_tasks`), one thread each; a sample's numbers depend on its seed only.
+
+A reproduction given a folder writes its settings there and each sample as it finishes
+(``settings.json``, ``samples/KEY.json``); run again on that folder it runs only the samples not
+yet there, so a reproduction of hours survives an interruption. With method 2, ``d_F`` and ``xi``
+are also fitted to ``I(k)`` averaged over the samples of a case, as Gilabert does (Sec. V).
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import time
 import traceback
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from .analysis.fractal import FitError, average_intensity, fit_structure
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
+from .io.jsonsafe import jsonable
 from .params import nonnegative
 from .state import STATUS_NONE
 
@@ -138,6 +148,10 @@ def published(name: str, case: Case) -> dict[str, Published]:
 
 
 REPRODUCTIONS = {"gilabert-method1": method1_cases, "gilabert-method2": method2_cases}
+PAPER_SIZE = {"gilabert-method1": (1400, 4), "gilabert-method2": (1400, 4)}
+"""Disks and samples per case at the paper's size: ``N = 1400`` (Sec. III A); method 2's series A
+is four samples of 1400 disks (and three of 5600, Sec. III B 2). The paper does not say how many
+samples each set of method 1 holds: four as well."""
 QUANTITIES = {
     "gilabert-method1": ("phi", "z"),
     "gilabert-method2": ("phi_0", "z_0", "d_F_0", "xi_0", "phi", "z", "d_F", "xi", "hole_radius_w"),
@@ -201,6 +215,8 @@ def _fractal(snapshot, prefix: str) -> dict:
         values = {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": result.fit_error}
     else:
         values = {f"d_F{prefix}": result.d_F, f"xi{prefix}": result.xi}
+    values.update({f"k{prefix}": result.k.tolist(), f"intensity{prefix}": result.intensity.tolist(),
+                   f"grid_phi{prefix}": result.phi})
     if prefix == "":  # the holes do not depend on the fit
         values["hole_radius_w"] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
     return values
@@ -269,9 +285,97 @@ def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
                       "mean_wall_time_s": float(np.mean([r["wall_time_s"] for r in done])) if done else None})
         if reproduction.name == "gilabert-method2":
             cases[-1]["balanced_at_zero_pressure"] = sum(1 for r in done if r.get("balanced_0"))
+            cases[-1]["averaged_fit"] = {"at_zero_pressure": averaged_fit(done, "_0"), "under_pressure":
+                                         averaged_fit(done, "")}
     failed = [{"case": r["case"], "seed": r["seed"], "error": r["error"]} for r in rows if r["error"]]
     return {"reproduction": reproduction.name, "settings": asdict(reproduction), "cases": cases,
             "samples": sorted(rows, key=lambda r: (r["case"], r["seed"])), "failed": failed}
+
+
+def averaged_fit(rows: list[dict], prefix: str) -> dict:
+    """Eq. 28 fitted to ``I(k)`` averaged over the samples of ``rows`` (``prefix`` "_0": at
+    ``P* = 0``), with the samples' mean grid solid fraction, in units of the diameter ``a = 1``."""
+    have = [r for r in rows if r.get(f"k{prefix}")]
+    fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "error": None}
+    if not have:
+        fit["error"] = "no sample's I(k)"
+        return fit
+    try:
+        k, intensity = average_intensity([r[f"k{prefix}"] for r in have], [r[f"intensity{prefix}"] for r in have])
+        result = fit_structure(k, intensity, float(np.mean([r[f"grid_phi{prefix}"] for r in have])), diameter=1.0)
+    except (FitError, ParameterError) as error:
+        fit["error"] = str(error)
+        return fit
+    fit.update(d_F=result.d_F, d_F_error=result.d_F_error, xi=result.xi, xi_error=result.xi_error)
+    return fit
+
+
+def sample_key(case: Case, seed: int) -> str:
+    """A sample's name, fit for a file name: ``cohesive-mu0.5-RR-seed3``."""
+    return (f"{'cohesive' if case.cohesive else 'cohesionless'}-mu{case.friction:g}-"
+            f"{'RR' if case.rolling else 'noRR'}-seed{seed}")
+
+
+SETTINGS_FILE = "settings.json"
+SAMPLES_FOLDER = "samples"
+
+
+def _write_json(path: Path, data) -> None:
+    """Write whole or not at all: an interruption leaves the previous file or none."""
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(jsonable(data), indent=1))
+    os.replace(partial, path)
+
+
+def start_folder(folder, reproduction: Reproduction) -> Path:
+    """A new folder for ``reproduction``'s samples, its settings written in it."""
+    folder = Path(folder)
+    if (folder / SETTINGS_FILE).exists():
+        raise GranLabError(f"{folder} holds a reproduction already: continue it with --resume {folder}, "
+                           "or give an empty folder")
+    try:
+        (folder / SAMPLES_FOLDER).mkdir(parents=True, exist_ok=True)
+        _write_json(folder / SETTINGS_FILE, asdict(reproduction))
+    except OSError as error:
+        raise GranLabError(f"cannot write the reproduction's folder {folder}: {error}") from error
+    return folder
+
+
+def resume_folder(folder) -> Reproduction:
+    """The settings of the reproduction in ``folder`` (see :func:`start_folder`)."""
+    path = Path(folder) / SETTINGS_FILE
+    if not path.is_file():
+        raise GranLabError(f"{folder} holds no reproduction ({SETTINGS_FILE} is missing): start one there with "
+                           f"--out {folder}")
+    try:
+        settings = json.loads(path.read_text())
+        return Reproduction(**settings)
+    except (OSError, ValueError, TypeError) as error:
+        raise GranLabError(f"{path} is not the settings of a reproduction: {error}") from error
+
+
+def finished_samples(folder) -> dict[str, dict]:
+    """The samples of ``folder`` that finished with their measurements, by :func:`sample_key`. A
+    failed sample, or a file that cannot be read, is not finished: it is run again."""
+    finished = {}
+    for path in sorted((Path(folder) / SAMPLES_FOLDER).glob("*.json")):
+        try:
+            row = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(row, dict) and row.get("error") is None:
+            finished[path.stem] = row
+    return finished
+
+
+def _sample_writer(folder, reproduction: Reproduction):
+    """``on_result`` of :func:`engine.studies.run_tasks` writing each sample into ``folder``."""
+    samples = Path(folder) / SAMPLES_FOLDER
+
+    def write(key: str, row: dict) -> None:
+        _write_json(samples / f"{key.removeprefix(reproduction.name + '-')}.json", row)
+
+    return write
 
 
 def warm_up() -> None:
@@ -283,24 +387,32 @@ def warm_up() -> None:
 
 
 def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, workers: int | None = None,
-                     progress=None) -> dict:
+                     progress=None, folder=None) -> dict:
     """Every sample of every case on Dask (see :func:`engine.studies.run_tasks`), summarised.
-    The cohesive cases with RR, the slowest, are submitted first."""
+    The cohesive cases with RR, the slowest, are submitted first. With ``folder`` (made by
+    :func:`start_folder`), each sample is written there as it finishes and the samples already
+    there are not run again (``resumed`` counts them; ``wall_time_s`` is this call's)."""
     from .studies import run_tasks
 
     start = time.perf_counter()
     seeds = range(reproduction.first_seed, reproduction.first_seed + reproduction.samples)
     cases = sorted(reproduction.cases, key=lambda c: (not c.cohesive, not c.rolling))
-    tasks = [(reproduction, case, seed) for case in cases for seed in seeds]
-    keys = [f"{reproduction.name}-{case.label}-seed{seed}".replace(" ", "") for _, case, seed in tasks]
+    done = finished_samples(folder) if folder is not None else {}
+    rows = [done[sample_key(case, seed)] for case in cases for seed in seeds if sample_key(case, seed) in done]
+    tasks = [(reproduction, case, seed) for case in cases for seed in seeds if sample_key(case, seed) not in done]
+    resumed = len(rows)
+    keys = [f"{reproduction.name}-{sample_key(case, seed)}" for _, case, seed in tasks]
     outcomes = run_tasks(gilabert_sample, tasks, keys, scheduler=scheduler, workers=workers, warm_up=warm_up,
-                         progress=progress)
-    rows = []
+                         progress=progress, on_result=None if folder is None else _sample_writer(folder, reproduction)
+                         ) if tasks else []
     for (_, case, seed), outcome in zip(tasks, outcomes):
         if isinstance(outcome, Exception):  # a lost worker
             outcome = {"case": case.label, **asdict(case), "seed": seed, "error": f"{type(outcome).__name__}: {outcome}"}
         rows.append(outcome)
     summary = summarize(reproduction, rows)
     summary["wall_time_s"] = time.perf_counter() - start
+    summary["sample_wall_time_s"] = float(sum(r.get("wall_time_s", 0.0) for r in rows))
+    summary["resumed"] = resumed
     summary["scheduler"] = scheduler or "local"
+    summary["folder"] = None if folder is None else str(folder)
     return summary

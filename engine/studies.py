@@ -9,9 +9,12 @@ its scheduler address.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -256,10 +259,26 @@ def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir
     return summary
 
 
+@contextlib.contextmanager
+def _workers_leave_interrupts_to_us():
+    """Ctrl-C reaches the whole process group: worker processes started in here ignore it and leave
+    it to this process, which stops them (else each prints its own KeyboardInterrupt traceback).
+    Only the main thread may change a signal's handler; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupt = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, interrupt)
+
+
 def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | None = None,
-              workers: int | None = None, warm_up=None, progress=None) -> list:
+              workers: int | None = None, warm_up=None, progress=None, on_result=None) -> list:
     """``function(*task)`` for every task on Dask, in the order of ``tasks``: its result, or the
-    exception raised by a task whose worker was lost (the others go on).
+    exception raised by a task whose worker was lost (the others go on). ``on_result(key, result)``
+    is called in this process as each task finishes (not for a lost worker's).
 
     Without ``scheduler``, ``warm_up()`` compiles the kernels first and a local cluster starts with
     ``workers`` (default: all cores) single-threaded worker processes; ``scheduler`` is the address
@@ -276,8 +295,9 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
         else:
             if warm_up is not None:
                 warm_up()
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
+            with _workers_leave_interrupts_to_us():
+                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                       processes=True, dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         with client:
             futures = [client.submit(function, *task, key=key, pure=False) for task, key in zip(tasks, keys)]
@@ -287,6 +307,9 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
                     outcomes[future.key] = future.result()
                 except Exception as error:  # a lost worker: report, go on
                     outcomes[future.key] = error
+                else:
+                    if on_result is not None:
+                        on_result(future.key, outcomes[future.key])
                 if progress is not None:
                     progress(done, len(futures))
     finally:

@@ -1,10 +1,14 @@
 """The Gilabert reproductions: published values as printed, Dask equal to serial, the physics of
 small samples, and bad input."""
 
+import json
 import math
+import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -171,3 +175,65 @@ def test_a_failed_fit_keeps_the_hole_radius():
     values = _fractal(snapshot, "")
     assert values["d_F"] is None and "did not converge" in values["fractal_error"]
     assert 0.3 < values["hole_radius_w"] < 1.0
+
+
+def test_intensities_of_boxes_of_different_sizes_are_averaged_on_common_bins():
+    from engine.analysis.fractal import average_intensity, fit_structure, structure_model
+
+    phi, d_F, xi, ell, constant = 0.3, 1.6, 8.0, 0.5, 2e-3
+    # two samples' bins: shells 2 pi / L wide, boxes 10 % apart, the second with 10 % more intensity
+    small, large = (np.geomspace(2.0 * math.pi / length, 6.0, 40) for length in (60.0, 66.0))
+    k, mean = average_intensity([small, large], [structure_model(small, phi, d_F, xi, ell, constant),
+                                                 1.1 * structure_model(large, phi, d_F, xi, ell, constant)])
+    assert k[0] == small[0] and k[-1] == small[-1] and k.size == small.size  # the smaller box's bins
+    assert mean == pytest.approx(1.05 * structure_model(k, phi, d_F, xi, ell, constant), rel=2e-3)
+    assert fit_structure(k, mean, phi, k_range=(0.0, 6.0)).d_F == pytest.approx(d_F, abs=0.01)
+    with pytest.raises(ParameterError, match="samples whose I\\(k\\) overlap in k"):
+        average_intensity([np.geomspace(0.1, 1.0, 5), np.geomspace(2.0, 9.0, 5)], [np.ones(5), np.ones(5)])
+    with pytest.raises(ParameterError, match="at least 2 such bins per sample"):
+        average_intensity([np.geomspace(0.1, 1.0, 5)], [np.zeros(5)])
+
+
+def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
+    folder = tmp_path / "method2"
+    command = [sys.executable, "-m", "engine.cli", "reproduce", "gilabert-method2", "--particles", "30",
+               "--samples", "2", "--max-time", "40", "--workers", "1", "--json"]
+    process = subprocess.Popen([*command, "--out", str(folder)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
+    samples = folder / "samples"
+    deadline = time.monotonic() + 240
+    while not list(samples.glob("*.json")) and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGINT)  # Ctrl-C, to the process and its Dask workers, after a first sample
+    _, stderr = process.communicate(timeout=60)
+    before = {path.name: path.read_text() for path in samples.glob("*.json")}
+    assert 1 <= len(before) < 4 and not list(samples.glob("*.partial"))
+    assert process.returncode == 130 and "Traceback" not in stderr
+    assert f"interrupted: {len(before)} of 4 samples are in {folder}; go on with granlab reproduce gilabert-method2 " \
+           f"--resume {folder}" in stderr
+
+    resumed = subprocess.run([*command[:5], "--resume", str(folder), "--json"], capture_output=True, text=True,
+                             timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    result = json.loads(resumed.stdout)
+    assert result["resumed"] == len(before) and result["failed"] == [] and len(result["samples"]) == 4
+    assert result["settings"]["particles"] == 30 and result["settings"]["max_time"] == 40.0
+    # a sample written before the interruption is the one a run from scratch would give, and is left as it was
+    assert {path.name: path.read_text() for path in samples.glob("*.json") if path.name in before} == before
+    row = json.loads(next(iter(before.values())))
+    reproduction = Reproduction("gilabert-method2", particles=30, samples=2, max_time=40.0)
+    serial = gilabert_sample(reproduction, Case(row["cohesive"], row["friction"], row["rolling"]), row["seed"])
+    assert (serial["phi"], serial["z"], serial["sim_time"]) == (row["phi"], row["z"], row["sim_time"])
+    for case in result["cases"]:
+        assert set(case["averaged_fit"]) == {"at_zero_pressure", "under_pressure"}
+        assert all(fit["samples"] == 2 for fit in case["averaged_fit"].values())
+
+    process = granlab("reproduce", "gilabert-method2", "--resume", str(folder), "--samples", "3")
+    assert process.returncode == 2 and "continues with the settings it was started with: drop --samples" in \
+        process.stderr
+    process = granlab("reproduce", "gilabert-method1", "--resume", str(folder))
+    assert process.returncode == 2 and "holds gilabert-method2, not gilabert-method1" in process.stderr
+    process = granlab("reproduce", "gilabert-method2", "--out", str(folder))
+    assert process.returncode == 2 and "holds a reproduction already: continue it with --resume" in process.stderr
+    process = granlab("reproduce", "gilabert-method2", "--resume", str(tmp_path / "none"))
+    assert process.returncode == 2 and "holds no reproduction (settings.json is missing)" in process.stderr

@@ -261,6 +261,35 @@ def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE)
     return k_sum[used] / count[used], scale * power_sum[used] / count[used]
 
 
+def average_intensity(ks, intensities) -> tuple[np.ndarray, np.ndarray]:
+    """``I(k)`` averaged over samples (Gilabert Sec. V fits the average over a series' samples, not
+    each sample). Boxes of one series differ a little in size, so their bins differ: each sample's
+    ``I`` is interpolated, linear in ``log I`` against ``log k`` (exact on a power law), at the bins
+    of the smallest box (the coarsest) within the range of ``k`` every sample covers, and the
+    values are averaged there. Bins with ``I <= 0`` are left out of a sample's interpolation."""
+    pairs = []
+    for k, intensity in zip(ks, intensities, strict=True):
+        k, intensity = np.asarray(k, dtype=float), np.asarray(intensity, dtype=float)
+        if k.ndim != 1 or k.shape != intensity.shape:
+            raise ParameterError("intensity", f"shape {intensity.shape}", f"a 1D array, one value per k ({k.shape})")
+        use = (k > 0.0) & (intensity > 0.0) & np.isfinite(intensity)
+        if np.count_nonzero(use) < 2:
+            raise ParameterError("intensity", f"{np.count_nonzero(use)} bins with k > 0 and I > 0",
+                                 "at least 2 such bins per sample")
+        pairs.append((k[use], intensity[use]))
+    if not pairs:
+        raise ParameterError("samples", 0, "at least one sample's I(k)")
+    low = max(k[0] for k, _ in pairs)
+    high = min(k[-1] for k, _ in pairs)
+    coarsest = max(pairs, key=lambda pair: pair[0][0])[0]
+    grid = coarsest[(coarsest >= low) & (coarsest <= high)]
+    if grid.size < 2:
+        raise ParameterError("k", f"common range [{low:.4g}, {high:.4g}]", "samples whose I(k) overlap in k")
+    log_grid = np.log(grid)
+    mean = np.mean([np.exp(np.interp(log_grid, np.log(k), np.log(intensity))) for k, intensity in pairs], axis=0)
+    return grid, mean
+
+
 # ------------------------------------------------------------------------------------- the fit
 
 def structure_model(k, phi: float, d_F: float, xi: float, ell: float, constant: float) -> np.ndarray:
