@@ -601,7 +601,8 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_argument("analysis", choices=ANALYSES)
     analyze.add_argument("--frame", type=int, default=-1, help="frame index (negative counts from the end; default -1)")
     analyze.add_argument("--load", choices=LOADS, default="auto",
-                         help="load increment of stiffness and status (default auto: the walls' loads, else random)")
+                         help="load increment of stiffness and status (default auto: the walls' loads, else random; "
+                              "cell: the target stress of a cell under stress control)")
     analyze.add_argument("--seed", type=int, default=0, help="seed of the random load increment")
     analyze.add_argument("--mu", type=_float,
                          help="friction coefficient to assume (default: the run's; other codes' files: 0.5)")

@@ -25,8 +25,9 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR, ZETA,
                            ZETA_R)
-from .params import TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite, positive
-from .state import (CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
+from .params import (CELL_CONTROLS, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite,
+                     positive)
+from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
                     ParticleState, RunOptions, WallState, Workspace)
 
 NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
@@ -174,6 +175,11 @@ class ContactSnapshot:
         return sum(getattr(self, name).nbytes for name in self.__dataclass_fields__)
 
 
+def cell_control_names(codes) -> tuple[str, str]:
+    """The control of each axis of a cell's ``control`` codes: ``"none"`` where not periodic."""
+    return tuple("none" if code == CELL_NONE else CELL_CONTROLS[code] for code in codes)
+
+
 @dataclass(frozen=True)
 class Snapshot:
     """A copy of the state at one instant (safe to hand to another thread)."""
@@ -204,6 +210,11 @@ class Snapshot:
     dt: float
     extra: dict = field(default_factory=dict)
     wall_modes: tuple[str, ...] = ()
+    cell_control: tuple[str, ...] = ()
+    """Per axis: ``"none"`` (not periodic) or the cell's control (:data:`engine.params.CELL_CONTROLS`);
+    empty: a fixed cell."""
+    cell_target_stress: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    """sigma_aa the stress-controlled axes are driven to (compression positive)."""
 
     @property
     def nbytes(self) -> int:
@@ -643,7 +654,8 @@ class Simulation:
             box_lengths=self.box_lengths(),
             periodic=self.periodic, virial=self.cell.virial.copy(), stress=self.stress(), energy=self.energy(),
             law=self.law,
-            dt=self.dt, wall_modes=tuple(WALL_MODES[m] for m in self.walls.mode))
+            dt=self.dt, wall_modes=tuple(WALL_MODES[m] for m in self.walls.mode),
+            cell_control=cell_control_names(self.cell.control), cell_target_stress=self.cell.target_stress.copy())
 
     def box_lengths(self) -> np.ndarray:
         """Lengths of the domain: periodic lengths, the distance between the walls named

@@ -10,9 +10,10 @@ import pytest
 from engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
                                        network)
 from engine.params import ContactLaw
+from engine.protocols.prepare import gilabert_law, method1
 from engine.protocols.presets import make_preset, preset_settings
 from engine.simulation import Simulation
-from engine.state import WALL_FORCE, WALL_VELOCITY, ParticleState
+from engine.state import CELL_STRAIN_RATE, CELL_STRESS, WALL_FORCE, WALL_VELOCITY, ParticleState
 
 
 @functools.cache
@@ -238,3 +239,77 @@ def test_mechanisms_of_a_free_triangle_are_its_rigid_motions_and_a_net_force_col
     m = mechanisms(net, pushed)
     assert m.collapse and (m.rigid_body, m.unexcited) == (3, 0)
     assert np.abs(m.collapse_mode[3 * 3:]).max() == 0.0  # the rattler takes no part
+
+
+@functools.cache
+def _stress_controlled_cell():
+    law = gilabert_law(friction=0.5, kappa=1e4, cohesion=False, rolling=False, pressure=0.01)
+    return method1(40, 0.36, 0.01, law, seed=3, max_time=200.0)
+
+
+def test_k_with_the_cells_two_strain_degrees_of_freedom_predicts_the_engines_force_changes(tmp_path):
+    """Gilabert App. A: a periodic cell under stress control adds dL_x/dt and dL_y/dt to the bodies'
+    velocities. A small displacement of the disks and of the cell's lengths (the lengths driven for
+    one step) changes the engine's forces on the disks and its virial by -k dx; the load on the cell,
+    -sigma^M A / L_a, is what the packing in equilibrium pushes back with."""
+    prepared = _stress_controlled_cell()
+    assert prepared.equilibrated
+    sim = prepared.sim.clone(damping_ratio=0.0, tangential_damping=0.0)
+    p, n = sim.particles, sim.particles.count
+    p.inv_mass[:] = 0.0
+    p.inv_inertia[:] = 0.0
+
+    def forces():
+        return np.concatenate([np.column_stack([p.force, p.torque / p.radius]).ravel(),
+                               np.diag(sim.cell.virial) / sim.cell.length])
+
+    def impose(dx):
+        p.velocity[:] = dx[: 3 * n].reshape(n, 3)[:, :2] / sim.dt
+        p.omega[:] = dx[: 3 * n].reshape(n, 3)[:, 2] / p.radius / sim.dt
+        sim.cell.control[:] = CELL_STRAIN_RATE
+        sim.cell.rate[:] = dx[3 * n:] / sim.dt
+        sim.run(1)
+        sim.cell.control[:] = CELL_STRESS
+        sim.cell.rate[:] = 0.0
+
+    impose(np.zeros(3 * n + 2))
+    before = forces()
+    snap = sim.snapshot()
+    assert snap.cell_control == ("stress", "stress")
+    net = network(snap)
+    assert net.dof == 3 * n + 2 and list(net.cell_dof) == [3 * n, 3 * n + 1]
+    # in equilibrium the packing's push on each axis balances the target stress
+    assert before[3 * n:] == pytest.approx(-net.external[3 * n:], rel=1e-3)
+    assert net.external[3 * n:] == pytest.approx(-0.01 * np.prod(snap.box_lengths) / snap.cell_lengths)
+    overlap = -snap.contacts.surface_gap[snap.contacts.surface_gap < 0].mean()
+    dx = np.random.default_rng(7).normal(size=net.dof) * 1e-3 * overlap
+    dx[3 * n:] *= 10.0  # the cell's lengths move as much as the disks' contacts
+    impose(dx)
+    df = forces() - before
+    k = stiffness_matrix(net, network(sim.snapshot()).sliding)
+    assert np.linalg.norm(df - -(k @ dx)) < 1e-3 * np.linalg.norm(df)
+    assert np.abs(df[3 * n:] - -(k @ dx)[3 * n:]).max() < 1e-3 * np.abs(df[3 * n:]).max()
+    fixed_cell = k[: 3 * n, : 3 * n] @ dx[: 3 * n]  # the disks' rows of the old k (cell held fixed)
+    assert np.linalg.norm(df[: 3 * n] + fixed_cell) > 0.1 * np.linalg.norm(df[: 3 * n])
+
+    # the run file carries the cell's control and target: the analysis of the file sees the same bodies
+    from engine.analysis.states import read_state
+    from engine.io.h5md import RunWriter
+
+    with RunWriter(tmp_path / "cell.h5", sim) as writer:
+        writer.write_frame(snap)
+    state = read_state(tmp_path / "cell.h5")
+    assert state.cell_control == ("stress", "stress")
+    again = network(state)
+    assert list(again.cell_dof) == list(net.cell_dof) and np.array_equal(again.external, net.external)
+    counts = rigidity(net)
+    assert counts.degrees_of_freedom == 3 * n + 2 and counts.balanced
+
+    from engine.analysis.report import load_increment
+    from engine.errors import GranLabError
+
+    increment, kind = load_increment(net, "cell")
+    assert kind == "cell" and np.flatnonzero(increment).tolist() == [3 * n, 3 * n + 1]
+    assert increment[3 * n:] == pytest.approx(net.external[3 * n:] / np.linalg.norm(net.external[3 * n:]))
+    with pytest.raises(GranLabError, match="load 'cell' needs a periodic cell under stress control"):
+        load_increment(network(packed_box("cundall-strack").snapshot()), "cell")

@@ -3,5 +3,5 @@
 ANALYSES = ("stiffness", "status", "rigidity", "packing", "fractal")
 """What ``granlab analyze`` and the lab's Analysis tab run (:mod:`engine.analysis.report`); named
 here so that the command line lists them without importing the analyses."""
-LOADS = ("auto", "walls", "random")
+LOADS = ("auto", "walls", "cell", "random")
 """Load increments of the stiffness and status analyses (:func:`engine.analysis.report.load_increment`)."""

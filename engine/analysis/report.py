@@ -27,9 +27,10 @@ The analyses:
 - ``fractal``: I(k), d_F, ξ and holes (Gilabert Sec. V).
 
 The load increment of ``stiffness`` and ``status`` (``load``): ``walls`` raises every load on a
-force-controlled wall in proportion; ``random`` pushes each disk with a random force (seeded);
-``auto`` takes ``walls`` when walls are loaded and ``random`` otherwise (a periodic cell of
-fixed size has no load of its own). The random forces act on the disks with at least two
+force-controlled wall in proportion; ``cell`` raises the target stress of each axis of a periodic
+cell under stress control in proportion (its lengths are then bodies of k, Gilabert App. A);
+``random`` pushes each disk with a random force (seeded); ``auto`` takes ``walls`` when walls are
+loaded and ``random`` otherwise. The random forces act on the disks with at least two
 interactions and add up to zero, so they excite neither rattlers, nor a disk hanging by one
 contact (a mechanism of its own), nor a translation of the whole. The principle of minimum sliding holds for any increment.
 """
@@ -266,12 +267,20 @@ def load_increment(net: st.Network, load: str = "auto", seed: int = 0) -> tuple[
     """The load increment df_ext (one value per velocity component) and the name of its kind."""
     if load not in LOADS:
         raise ParameterError("load", load, f"one of {', '.join(LOADS)}")
-    walls = net.external
+    walls = np.zeros(net.dof)
+    walls[net.wall_dof[net.wall_dof >= 0]] = net.external[net.wall_dof[net.wall_dof >= 0]]
     if load == "walls" or (load == "auto" and np.any(walls != 0.0)):
         if not np.any(walls != 0.0):
             raise GranLabError("load 'walls' needs a force-controlled wall with a load; this state has none "
-                               "(use load 'random')")
+                               "(use load 'cell' for a cell under stress control, or 'random')")
         return walls / np.linalg.norm(walls), "walls"
+    if load == "cell":
+        cell = np.zeros(net.dof)
+        cell[net.cell_dof[net.cell_dof >= 0]] = net.external[net.cell_dof[net.cell_dof >= 0]]
+        if not np.any(cell != 0.0):
+            raise GranLabError("load 'cell' needs a periodic cell under stress control with a target stress; this "
+                               "state has none (use load 'walls' or 'random')")
+        return cell / np.linalg.norm(cell), "cell"
     rng = np.random.default_rng(seed)
     out = np.zeros(net.dof)
     interactions = np.bincount(net.first, minlength=net.disks) + np.bincount(net.second[net.second >= 0],

@@ -31,7 +31,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import GranLabError
 from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, XYZFrame, read_xyz_frames
-from ..io.h5md import RunFileError, frame_count, open_run, parameters, read_frame, walls_from_json
+from ..io.h5md import (RunFileError, cell_control_of, frame_count, open_run, parameters, read_frame,
+                       walls_from_json)
 from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
 from ..simulation import ContactSnapshot, Snapshot
@@ -65,13 +66,17 @@ class PackingState:
     forces_known: bool
     source: str
     law_given: bool = True
+    cell_control: tuple[str, ...] = ()
+    """Per axis ``"none"`` or the cell's control; empty: a fixed cell (as in other codes' files)."""
+    cell_target_stress: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(2))
 
     @classmethod
     def from_snapshot(cls, snap: Snapshot, source: str = "simulation") -> "PackingState":
         return cls(snap.positions, snap.radii, snap.contacts, snap.law, tuple(snap.wall_names),
                    np.asarray(snap.wall_normals), np.asarray(snap.wall_offsets), np.asarray(snap.wall_forces),
                    tuple(snap.wall_modes), np.asarray(snap.cell_lengths), np.asarray(snap.box_lengths),
-                   tuple(snap.periodic), np.asarray(snap.stress), float(snap.time), int(snap.step), True, source)
+                   tuple(snap.periodic), np.asarray(snap.stress), float(snap.time), int(snap.step), True, source,
+                   cell_control=tuple(snap.cell_control), cell_target_stress=np.asarray(snap.cell_target_stress))
 
     @property
     def disks(self) -> int:
@@ -234,7 +239,8 @@ def _granlab_state(f: h5py.File, index: int, path: str) -> PackingState:
         np.asarray(frame.get("wall_force", np.zeros(nw)), dtype=float), modes,
         np.asarray(frame["edges"], dtype=float), np.asarray(frame["edges"], dtype=float), periodic,
         np.asarray(frame.get("stress", np.zeros((2, 2))), dtype=float), frame["time"], frame["step"],
-        True, f"{path} frame {frame['index']}")
+        True, f"{path} frame {frame['index']}", cell_control=cell_control_of(frame, periodic),
+        cell_target_stress=np.asarray(frame.get("cell_target_stress", np.zeros(2)), dtype=float))
 
 
 def _particle_group(f: h5py.File, path: str) -> h5py.Group:

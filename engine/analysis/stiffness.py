@@ -3,8 +3,17 @@ App. A; Gilabert App. A).
 
 Bodies and their velocities (quasi-rigidity Eq. 15): each disk i has ``(v_x, v_y, r_i w_i)``; each
 wall in force mode (a wall pushed by a load, free along its normal) has one, its velocity along its
-normal. Fixed and velocity-driven walls are supports, not bodies. The periodic cell, if any, is held
-fixed (Gilabert Eq. 19 "written here for a fixed cell").
+normal; each axis of a periodic cell under stress control (Gilabert Eq. 3) has one, the rate
+``dL_a/dt`` of its length (the cell's "two strain degrees of freedom", Gilabert App. A: N_f = 3N + 2).
+Fixed and velocity-driven walls, and fixed or strain-rate-driven axes, are supports, not bodies.
+
+Disk velocities are those relative to the cell's affine motion (as in the engine): a contact
+through the cell has ``V = v_i - v_j + (dL/dt / L) r`` per axis, so the column of axis a holds
+``n_a r_a / L_a`` (normal) and ``alpha t_a r_a / L_a`` (tangential), and the force conjugate to
+``dL_a/dt`` is ``sum_c f_a r_a / L_a = sigma^I_aa A / L_a`` (the contact virial, compression
+positive). Its load is ``-sigma^M_aa A / L_a``, the target stress pressing the cell in. Wall
+contacts do not deform with the cell. The terms of the pre-stress (the turn of n, and A changing
+with L) are left out here as for the disks: they are of order N^e/(K_n r) against those kept.
 
 Contacts follow the engine's conventions (:mod:`engine.kernels.laws`, :mod:`engine.kernels.contacts`):
 ``n`` points from j to i (from a wall into its disk), ``t = z × n``, ``F_n > 0`` repels,
@@ -54,7 +63,10 @@ class Network:
     ``first (M,)`` disk i; ``second (M,)`` disk j or -1 for a wall; ``wall (M,)`` the wall's index or
     -1; ``normal (M, 2)``; ``alpha (M,)``; ``kn, kt, kr (M,)`` tangent stiffnesses; ``status (M,)``;
     ``elastic_normal (M,)`` N^e; ``tangential (M,)`` F_t; ``wall_dof (W,)`` the velocity index of
-    each wall (-1 for a support); ``external (n_dof,)`` the load on each velocity component.
+    each wall (-1 for a support); ``external (n_dof,)`` the load on each velocity component;
+    ``branch (M, 2)`` r = x_i - x_j - image L (for a wall: zero, it does not deform with the cell);
+    ``cell_lengths (2,)``; ``cell_dof (2,)`` the velocity index of each axis of the cell (-1 unless
+    under stress control).
     """
 
     positions: np.ndarray
@@ -74,6 +86,9 @@ class Network:
     wall_normals: np.ndarray
     wall_dof: np.ndarray
     external: np.ndarray
+    branch: np.ndarray
+    cell_lengths: np.ndarray
+    cell_dof: np.ndarray
 
     @property
     def disks(self) -> int:
@@ -85,7 +100,7 @@ class Network:
 
     @property
     def dof(self) -> int:
-        return 3 * self.disks + int(np.count_nonzero(self.wall_dof >= 0))
+        return 3 * self.disks + int(np.count_nonzero(self.wall_dof >= 0)) + int(np.count_nonzero(self.cell_dof >= 0))
 
     @property
     def distant(self) -> np.ndarray:
@@ -147,11 +162,20 @@ def network(snapshot, cell_lengths=None) -> Network:
     mobile = np.array([m == "force" for m in modes], dtype=bool)
     wall_dof = np.full(len(modes), -1)
     wall_dof[mobile] = 3 * n + np.arange(int(mobile.sum()))
-    external = np.zeros(3 * n + int(mobile.sum()))
+    controlled = np.array([c == "stress" for c in snapshot.cell_control] or [False, False])
+    cell_dof = np.full(2, -1)
+    cell_dof[controlled] = 3 * n + int(mobile.sum()) + np.arange(int(controlled.sum()))
+    lengths = np.asarray(snapshot.cell_lengths, dtype=float)
+    external = np.zeros(3 * n + int(mobile.sum()) + int(controlled.sum()))
     external[wall_dof[mobile]] = -np.asarray(snapshot.wall_forces)[mobile]
+    if controlled.any():
+        area = float(np.prod(snapshot.box_lengths))
+        target = np.asarray(snapshot.cell_target_stress, dtype=float)
+        external[cell_dof[controlled]] = -target[controlled] * area / lengths[controlled]
     return Network(snapshot.positions, snapshot.radii, i, second, wall, normal, alpha, kn, kt, kr, status,
                    c.elastic_normal_force[keep], c.tangential_force[keep], float(law.friction),
-                   np.asarray(snapshot.wall_normals), wall_dof, external)
+                   np.asarray(snapshot.wall_normals), wall_dof, external, np.where(is_wall[:, None], 0.0, branch),
+                   lengths, cell_dof)
 
 
 def compatibility(net: Network, components=(NORMAL, TANGENTIAL)) -> sp.csr_matrix:
@@ -187,6 +211,11 @@ def compatibility(net: Network, components=(NORMAL, TANGENTIAL)) -> sp.csr_matri
             values.append(-1.0 / net.radii[j[pair]])
         else:
             raise ParameterError("contact component", component, "NORMAL, TANGENTIAL or ROLLING")
+        if component in (NORMAL, TANGENTIAL):  # the cell's strain rates deform r
+            along = net.normal if component == NORMAL else net.alpha[:, None] * np.column_stack([tx, ty])
+            for axis in np.flatnonzero(net.cell_dof >= 0):
+                entries.append((np.full(m, net.cell_dof[axis]), along[:, axis] * net.branch[:, axis]
+                                / net.cell_lengths[axis]))
         for r, v in entries:
             rows.append(r)
             cols.append(col)

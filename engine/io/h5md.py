@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import GranLabError, OutputError
-from ..params import WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
+from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation
 from ..state import STATUS_NAMES, ParticleState
 from .outputs import occupied
@@ -50,8 +50,25 @@ PARTICLE_ELEMENTS = (("position", (2,)), ("velocity", (2,)), ("angle", ()), ("om
 
 FRAME_OBSERVABLES = (("wall_position", "observables/walls/position"), ("wall_force", "observables/walls/force"),
                      ("wall_mode", "observables/walls/mode"), ("stress", "observables/stress"),
-                     ("law_json", "observables/law"), ("lab_settings_json", "observables/lab/settings"))
+                     ("law_json", "observables/law"), ("lab_settings_json", "observables/lab/settings"),
+                     ("cell_control", "observables/cell/control"),
+                     ("cell_target_stress", "observables/cell/target_stress"))
 """Per-frame observables that :func:`read_frame` returns with the particles (key, path)."""
+
+
+def cell_control_codes(snap) -> list[int]:
+    """The cell's control per axis as stored: the index in :data:`CELL_CONTROLS`, -1 where the axis is
+    not periodic (a snapshot that names no control has a fixed cell)."""
+    names = snap.cell_control or tuple("fixed" if p else "none" for p in snap.periodic)
+    return [-1 if name == "none" else CELL_CONTROLS.index(name) for name in names]
+
+
+def cell_control_of(frame: dict, periodic) -> tuple[str, ...]:
+    """The cell's control per axis of a frame of :func:`read_frame` (fixed in a run file written before
+    the cell's control was stored)."""
+    if "cell_control" not in frame:
+        return tuple("fixed" if p else "none" for p in periodic)
+    return tuple("none" if code < 0 else CELL_CONTROLS[code] for code in frame["cell_control"])
 
 
 class RunFileError(GranLabError, OSError):
@@ -173,6 +190,10 @@ class RunWriter:
         time_dependent(walls, "force", (nw,))
         time_dependent(walls, "mode", (nw,), np.int8)
         time_dependent(observables, "stress", (2, 2))
+        cell = observables.create_group("cell")
+        cell.attrs["control_names"] = np.array(CELL_CONTROLS, dtype="S12")
+        time_dependent(cell, "control", (2,), np.int8)
+        time_dependent(cell, "target_stress", (2,))
         time_dependent(observables, "law", (), h5py.string_dtype())
         cycles = observables.create_group("cycles")
         for name in CYCLE_FIELDS:
@@ -275,6 +296,8 @@ class RunWriter:
         self._element("observables/walls/force", step, time, snap.wall_forces)
         self._element("observables/walls/mode", step, time, [WALL_MODES.index(m) for m in snap.wall_modes])
         self._element("observables/stress", step, time, snap.stress)
+        self._element("observables/cell/control", step, time, cell_control_codes(snap))
+        self._element("observables/cell/target_stress", step, time, snap.cell_target_stress)
         self._element("observables/law", step, time, to_json(snap.law))
         if settings is not None:
             self._element("observables/lab/settings", step, time, settings)
