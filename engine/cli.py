@@ -294,21 +294,42 @@ def _study(args) -> dict:
     from .studies import RatchetStudy, run_ratchet_study, text_progress
 
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
-    study = RatchetStudy(particles=args.particles, samples=args.samples, cycles=args.cycles, models=models,
-                         amplitude=args.amplitude, period=args.period,
-                         phase=None if args.phase is None else math.radians(args.phase),
-                         friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
-                         gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
-    progress = None if args.json else text_progress
-    result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=args.out, progress=progress, force=args.force)
-    if result["failed"] and not any(model["completed"] for model in result["models"].values()):
-        first = result["failed"][0]
-        raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "
-                           f"{first['seed']} ({first['model']}): {first['error']}")
-    return result
+    sweep = len(args.amplitude) > 1
+    results = []
+    for amplitude in args.amplitude:
+        study = RatchetStudy(particles=args.particles, samples=args.samples, cycles=args.cycles, models=models,
+                             amplitude=amplitude, period=args.period,
+                             phase=None if args.phase is None else math.radians(args.phase),
+                             friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
+                             gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
+        out = str(Path(args.out) / f"amplitude-{amplitude:g}") if sweep and args.out else args.out
+        result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=out,
+                                   progress=None if args.json else text_progress, force=args.force)
+        if result["failed"] and not any(model["completed"] for model in result["models"].values()):
+            first = result["failed"][0]
+            raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "
+                               f"{first['seed']} ({first['model']}): {first['error']}")
+        results.append(result)
+    if not sweep:
+        return results[0]
+    return {"study": "ratchet amplitude sweep", "amplitudes": list(args.amplitude), "results": results,
+            "wall_time_s": sum(r["wall_time_s"] for r in results)}
 
 
 def _print_study(result: dict) -> None:
+    if "results" in result:
+        for one in result["results"]:
+            print(f"amplitude Delta sigma / P0 = {one['settings']['amplitude']:g}:")
+            _print_study(one)
+        print(f"{'amplitude':>9}  {'model':<16}{'ratcheting':>11}{'without jumps':>15}  |dgamma| geometric mean (range)")
+        for one in result["results"]:
+            for model, data in one["models"].items():
+                spread = "-" if not data["geomean_abs_dgamma"] else (
+                    f"{data['geomean_abs_dgamma']:.3g} ({data['range_abs_dgamma'][0]:.3g}..{data['range_abs_dgamma'][1]:.3g})")
+                print(f"{one['settings']['amplitude']:>9g}  {model:<16}{data['ratcheting']:>6}/{data['completed']:<4}"
+                      f"{data['ratcheting_without_outliers']:>10}/{data['completed']:<4}  {spread}")
+        print(f"total {result['wall_time_s']:.1f} s")
+        return
     settings = result["settings"]
     print(f"ratchet study: {settings['samples']} samples of {settings['particles']} disks, {settings['cycles']} cycles, "
           f"{result['wall_time_s']:.1f} s on {result['scheduler']}")
@@ -318,7 +339,8 @@ def _print_study(result: dict) -> None:
             low, high = data["range_abs_dgamma"]
             print(f"; |dgamma| geometric mean {data['geomean_abs_dgamma']:.3g}, range {low:.3g}..{high:.3g}; "
                   f"{data['positive']} positive, {data['negative']} negative", end="")
-        print(f"; {data['shakedown']} shakedown, {data['with_outliers']} with outliers")
+        print(f"; {data['shakedown']} shakedown, {data['with_outliers']} with outliers "
+              f"({data['ratcheting_without_outliers']} ratchet without their jumps)")
         for sample in data["samples"]:
             if sample["error"]:
                 print(f"    seed {sample['seed']} failed: {sample['error']}")
@@ -554,7 +576,9 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--phase", type=_float, help="elliptic loading with this phase (degrees; Eqs. 4-5)")
     ratchet.add_argument("--mu", type=_float, default=0.2, help="friction during cycling (inf: no sliding)")
     ratchet.add_argument("--dt-factor", type=_float, default=0.2, help="dt = f sqrt(m_min / K_n) (default 0.2)")
-    ratchet.add_argument("--amplitude", type=_float, default=0.2, help="Delta sigma in units of P0 (default 0.2)")
+    ratchet.add_argument("--amplitude", type=_float, nargs="+", default=[0.2], metavar="A",
+                         help="Delta sigma in units of P0 (default 0.2); several: a sweep, the same samples at each "
+                              "(with --out, a folder amplitude-A for each)")
     ratchet.add_argument("--period", type=_float, default=10.0, help="cycle period in tau (default 10)")
     ratchet.add_argument("--reference-cycle", type=int,
                          help="cycle defining L0 (default 30 %% of --cycles, at most cycles - 3: 30 of 100)")

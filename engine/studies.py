@@ -180,7 +180,10 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
             verdict = curve.verdict
             results.append({"seed": seed, "model": model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
                             "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,
-                            "outlier_cycles": verdict.outlier_cycles, "equilibrated": prepared.equilibrated,
+                            "outlier_cycles": verdict.outlier_cycles,
+                            "dgamma_without_outliers": verdict.dgamma_without_outliers,
+                            "ratcheting_without_outliers": verdict.ratcheting_without_outliers,
+                            "equilibrated": prepared.equilibrated,
                             "run_file": run_file, "wall_time_s": time.perf_counter() - start, "error": None})
         except Exception as error:  # reported per sample: the others go on
             results.append(_failure(study, seed, model, error))
@@ -201,7 +204,8 @@ def _failure(study, seed, model, error) -> dict:
 
 def summarize(study: RatchetStudy, results: list[dict]) -> dict:
     """Per model: fraction ratcheting, geometric mean and range of |dgamma| over the ratcheting
-    samples, count of each sign, and the samples."""
+    samples, count of each sign, how many ratchet once a rattler's jumps are taken out of the
+    series (:class:`engine.analysis.ratchet.RatchetVerdict`), and the samples."""
     models = {}
     for model in study.models:
         rows = sorted((r for r in results if r["model"] == model), key=lambda r: r["seed"])
@@ -218,8 +222,10 @@ def summarize(study: RatchetStudy, results: list[dict]) -> dict:
             "negative": sum(1 for r in ratcheting if r["dgamma"] < 0),
             "shakedown": sum(1 for r in done if r.get("shakedown")),
             "with_outliers": sum(1 for r in done if r.get("outlier_cycles")),
+            "ratcheting_without_outliers": sum(1 for r in done if r.get("ratcheting_without_outliers")),
             "samples": [{k: r.get(k) for k in ("seed", "dgamma", "ratcheting", "rms_deviation", "shakedown",
-                                                "outlier_cycles", "run_file", "error")} for r in rows],
+                                                "outlier_cycles", "dgamma_without_outliers",
+                                                "ratcheting_without_outliers", "run_file", "error")} for r in rows],
         }
     failed = [{"seed": r["seed"], "model": r["model"], "error": r["error"]} for r in results if r["error"]]
     return {"study": "ratchet", "settings": {k: v for k, v in study.__dict__.items()}, "models": models,

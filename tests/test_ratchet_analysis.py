@@ -21,13 +21,14 @@ def test_linear_creep_with_small_noise_ratchets_with_its_slope():
     assert verdict.dgamma == pytest.approx(-3e-9, rel=1e-2)
     assert verdict.rms_deviation < 2e-10
     assert not verdict.shakedown and verdict.outlier_cycles == []
+    assert verdict.ratcheting_without_outliers and verdict.dgamma_without_outliers == verdict.dgamma
 
 
 def test_noise_without_trend_does_not_ratchet():
     cycles = np.arange(30, 101)
     gamma = np.random.default_rng(1).normal(0.0, 1e-9, cycles.size)
     verdict = ratchet_verdict(cycles, gamma)
-    assert not verdict.ratcheting
+    assert not verdict.ratcheting and not verdict.ratcheting_without_outliers
     assert verdict.rms_deviation > abs(verdict.dgamma)
 
 
@@ -45,6 +46,9 @@ def test_isolated_jumps_are_outliers():
     gamma[55] += 3e-7   # and bumped once more in cycle 85
     verdict = ratchet_verdict(cycles, gamma)
     assert verdict.outlier_cycles == [70, 85, 86]
+    # the jumps hide the creep from the paper's rule; without them it is there, at its own slope
+    assert not verdict.ratcheting and verdict.dgamma > 4e-9
+    assert verdict.ratcheting_without_outliers and verdict.dgamma_without_outliers == pytest.approx(2e-9)
 
 
 def test_bad_series_are_refused():

@@ -34,6 +34,30 @@ def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):
     assert summary["failed"] == []
 
 
+def test_an_amplitude_sweep_cycles_the_same_samples_at_each_amplitude(tmp_path):
+    process = granlab("study", "ratchet", "--particles", "9", "--samples", "2", "--cycles", "8", "--period", "2",
+                      "--reference-cycle", "2", "--amplitude", "0.1", "0.4", "--out", str(tmp_path), "--json")
+    assert process.returncode == 0, process.stderr
+    sweep = json.loads(process.stdout)
+    assert sweep["amplitudes"] == [0.1, 0.4] and [r["settings"]["amplitude"] for r in sweep["results"]] == [0.1, 0.4]
+    small, large = (r["models"]["cundall-strack"] for r in sweep["results"])
+    assert small["completed"] == large["completed"] == 2
+    for data in (small, large):
+        assert 0 <= data["ratcheting_without_outliers"] <= 2
+        for sample in data["samples"]:
+            assert isinstance(sample["ratcheting_without_outliers"], bool)
+            assert sample["dgamma_without_outliers"] == sample["dgamma"] or sample["outlier_cycles"]
+    # the same packing each time (seeds 0, 1), each amplitude in its own folder
+    assert sorted(p.name for p in (tmp_path / "amplitude-0.1").iterdir()) == [
+        "ratchet_cundall-strack_seed0.h5", "ratchet_cundall-strack_seed1.h5"]
+    first = [h5md.summary(tmp_path / f"amplitude-{a}" / "ratchet_cundall-strack_seed0.h5") for a in ("0.1", "0.4")]
+    assert first[0]["protocol"]["amplitude"] == 0.1 and first[1]["protocol"]["amplitude"] == 0.4
+    printed = granlab("study", "ratchet", "--particles", "9", "--samples", "1", "--cycles", "4", "--period", "2",
+                      "--reference-cycle", "0", "--amplitude", "0.1", "0.2").stdout
+    assert "amplitude  model            ratcheting  without jumps" in printed
+    assert "      0.2  cundall-strack" in printed
+
+
 def test_a_failing_sample_is_reported_and_does_not_stop_the_others():
     bad = RatchetStudy(particles=4, samples=1, cycles=5, reference_cycle=0, gravity=1e3)
     results = ratchet_sample(bad, 3, None)

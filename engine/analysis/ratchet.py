@@ -28,7 +28,10 @@ class RatchetVerdict:
       cycles is below half that in the first third, with a negative trend);
     - ``outlier_cycles``: cycles whose increment lies more than 6 robust standard
       deviations (1.4826 × median absolute deviation, at least 5 % of the median increment)
-      from the median increment.
+      from the median increment;
+    - ``dgamma_without_outliers``, ``ratcheting_without_outliers``: the same fit and rule on the
+      series with each outlier increment replaced by the median increment: the verdict without the
+      jumps a rattler's collisions make (Sec. IV B 3, Figs. 15-16).
     """
 
     dgamma: float
@@ -38,6 +41,14 @@ class RatchetVerdict:
     outlier_cycles: list[int] = field(default_factory=list)
     cycles_used: int = 0
     gamma: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    dgamma_without_outliers: float = 0.0
+    ratcheting_without_outliers: bool = False
+
+
+def _line(cycles, gamma) -> tuple[float, float]:
+    """Slope of the least-squares line through ``gamma(cycles)`` and the RMS distance from it."""
+    slope, intercept = np.polyfit(cycles, gamma, 1)
+    return float(slope), float(np.sqrt(np.mean((gamma - (slope * cycles + intercept)) ** 2)))
 
 
 def ratchet_verdict(cycles, gamma) -> RatchetVerdict:
@@ -50,18 +61,23 @@ def ratchet_verdict(cycles, gamma) -> RatchetVerdict:
         raise ParameterError("cycles", int(cycles.size), "at least 3 cycles after the reference cycle")
     if not np.all(np.isfinite(gamma)):
         raise ParameterError("gamma", "non-finite values", "finite strains")
-    slope, intercept = np.polyfit(cycles, gamma, 1)
-    residual = gamma - (slope * cycles + intercept)
-    rms = float(np.sqrt(np.mean(residual ** 2)))
+    slope, rms = _line(cycles, gamma)
     increments = np.diff(gamma)
     median = np.median(increments)
     spread = max(1.4826 * np.median(np.abs(increments - median)), 0.05 * abs(median),
                  1e-12 * float(np.max(np.abs(gamma))))
-    outliers = [int(cycles[k + 1]) for k in np.flatnonzero(np.abs(increments - median) > 6.0 * spread)]
+    jumps = np.abs(increments - median) > 6.0 * spread
+    outliers = [int(cycles[k + 1]) for k in np.flatnonzero(jumps)]
+    slope_smooth, rms_smooth = slope, rms
+    if outliers:
+        smoothed = np.concatenate([[gamma[0]], gamma[0] + np.cumsum(np.where(jumps, median, increments))])
+        slope_smooth, rms_smooth = _line(cycles, smoothed)
     third = max(1, increments.size // 3)
     size = np.abs(increments)
     early, late = float(np.mean(size[:third])), float(np.mean(size[-third:]))
     trend = np.polyfit(np.arange(size.size), size, 1)[0] if size.size >= 2 else 0.0
     shakedown = bool(increments.size >= 6 and early > 0 and late < 0.5 * early and trend < 0)
-    return RatchetVerdict(dgamma=float(slope), rms_deviation=rms, ratcheting=bool(rms < abs(slope)),
-                          shakedown=shakedown, outlier_cycles=outliers, cycles_used=int(cycles.size), gamma=gamma)
+    return RatchetVerdict(dgamma=slope, rms_deviation=rms, ratcheting=bool(rms < abs(slope)),
+                          shakedown=shakedown, outlier_cycles=outliers, cycles_used=int(cycles.size), gamma=gamma,
+                          dgamma_without_outliers=slope_smooth,
+                          ratcheting_without_outliers=bool(rms_smooth < abs(slope_smooth)))
