@@ -63,7 +63,7 @@ MISSING = "—"
 LABELS = {
     # stiffness and status (quasi-rigidity paper)
     "disks": "Disks N",
-    "dof": "Velocity components: 3 per disk, 1 per loaded wall (quasi-rigidity Eq. 15)",
+    "dof": "Velocity components: 3 per disk, 1 per loaded wall or stress-controlled cell length (quasi-rigidity Eq. 15)",
     "contacts": "Interactions M: contacts and distant cohesive pairs",
     "sliding_contacts": "Contacts sliding in the dynamics",
     "distant_interactions": "Distant cohesive interactions",
@@ -87,7 +87,7 @@ LABELS = {
     "bijective": "Consistency map C is a bijection (quasi-rigidity Eq. 5)",
     "enumeration_skipped": "Enumeration of the 2^M_c states",
     # rigidity (Gilabert App. A)
-    "degrees_of_freedom": "Degrees of freedom N_f (Gilabert App. A)",
+    "degrees_of_freedom": "Degrees of freedom N_f: 3 per disk, 1 per loaded wall or stress-controlled cell length (Gilabert App. A)",
     "constraints": "Constraints M: relative motions that carry forces",
     "floppy_modes": "Floppy modes K = dim null G",
     "hyperstaticity": "Degree of hyperstaticity H = dim null Gᵀ",
