@@ -34,6 +34,7 @@ from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError
 from .io.jsonsafe import jsonable
 from .params import TANGENTIAL, TANGENTIAL_MODELS
+from .protocols.prepare import CELL_MASS_READINGS
 from .reproduce import REPRODUCTIONS
 
 
@@ -350,7 +351,7 @@ def _print_study(result: dict) -> None:
 
 _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
                          "max_time": "--max-time", "rolling_damping_ratio": "--rolling-damping",
-                         "cell_mass_disks": "--cell-mass-disks"}
+                         "cell_mass_disks": "--cell-mass-disks", "cell_mass": "--cell-mass"}
 
 
 def _reproduce(args) -> dict:
@@ -389,7 +390,8 @@ def _reproduce(args) -> dict:
 
 def _print_reproduce(result: dict) -> None:
     settings = result["settings"]
-    print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case, "
+    print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case "
+          f"(cell mass M: {settings['cell_mass']} reading, of {settings['cell_mass_disks']} disks), "
           f"{result['wall_time_s']:.1f} s on {result['scheduler']} (samples' own times: "
           f"{result['sample_wall_time_s']:.1f} s)")
     if result["folder"]:
@@ -606,6 +608,10 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--cell-mass-disks", type=_positive_int, metavar="N",
                            help="the cell's generalized mass M (Eq. 3) is the paper's for N disks (default 1400, "
                                 "the paper's size: every sample size then compacts at the paper's rate)")
+    reproduce.add_argument("--cell-mass", choices=CELL_MASS_READINGS,
+                           help="reading of M: 'mass', 3/10 of the grain mass (default: a mass, as Eq. 3 needs "
+                                "in 2D; reproduces Table III), or 'per-length', that over the cell size L (the "
+                                "paper's words; compacts faster, looser and less coordinated)")
     reproduce.add_argument("--seed", type=int, help="first seed (default 0)")
     folder = reproduce.add_mutually_exclusive_group()
     folder.add_argument("--out", metavar="DIR", help="write the settings and each sample to DIR as it finishes")

@@ -169,7 +169,9 @@ class Reproduction:
     one contact swings on its rolling spring for ever and the samples never meet the force
     criterion. ``cell_mass_disks``: the cell's generalized mass ``M`` (Eq. 3) is the paper's for a
     sample of that many disks (default 1400, the paper's size; see
-    :func:`engine.protocols.prepare.cell_mass`), so that every size compacts at the paper's rate."""
+    :func:`engine.protocols.prepare.cell_mass`), so that every size compacts at the paper's rate;
+    ``cell_mass`` is the reading of ``M`` (``mass``, 3/10 of the grain mass, or ``per-length``, that
+    over the cell size: :data:`engine.protocols.prepare.CELL_MASS_READINGS`)."""
 
     name: str
     particles: int = 100
@@ -178,8 +180,11 @@ class Reproduction:
     max_time: float = 500.0
     rolling_damping_ratio: float = 0.8
     cell_mass_disks: int = 1400
+    cell_mass: str = "mass"
 
     def __post_init__(self):
+        from .protocols.prepare import CELL_MASS_READINGS
+
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
         for key, least in (("particles", 2), ("samples", 1), ("cell_mass_disks", 1)):
@@ -189,6 +194,8 @@ class Reproduction:
         if not self.max_time > 0:
             raise ParameterError("max_time", self.max_time, "a positive duration")
         nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
+        if self.cell_mass not in CELL_MASS_READINGS:
+            raise ParameterError("cell_mass", self.cell_mass, "one of " + ", ".join(CELL_MASS_READINGS))
 
     @property
     def cases(self) -> tuple[Case, ...]:
@@ -236,7 +243,7 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
                            pressure=P_STAR, rolling_damping_ratio=reproduction.rolling_damping_ratio)
         if reproduction.name == "gilabert-method1":
             prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time,
-                               cell_mass_disks=reproduction.cell_mass_disks)
+                               cell_mass_disks=reproduction.cell_mass_disks, cell_mass_reading=reproduction.cell_mass)
         else:
             def at_zero_pressure(stage, sim):
                 if stage == "relaxation":
@@ -249,7 +256,8 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
 
             prepared = method2(reproduction.particles, PHI_I, P_STAR, law, speed=SPEED * math.sqrt(
                 law.cohesion_force * law.cohesion_range), seed=seed, max_strain_rate=MAX_STRAIN_RATE,
-                on_stage=at_zero_pressure, max_time=reproduction.max_time, cell_mass_disks=reproduction.cell_mass_disks)
+                on_stage=at_zero_pressure, max_time=reproduction.max_time, cell_mass_disks=reproduction.cell_mass_disks,
+                cell_mass_reading=reproduction.cell_mass)
         snapshot = prepared.sim.snapshot()
         stats = packing_stats(snapshot, prepared.report.force_scale)
         row.update(phi=stats.phi, z=coordination(snapshot, case.cohesive, prepared.report.force_scale),
@@ -349,7 +357,8 @@ def resume_folder(folder) -> Reproduction:
                            f"--out {folder}")
     try:
         settings = json.loads(path.read_text())
-        return Reproduction(**settings)
+        # folders made before the choice of reading (Nov 2026) used the per-length one
+        return Reproduction(**{"cell_mass": "per-length", **settings})
     except (OSError, ValueError, TypeError) as error:
         raise GranLabError(f"{path} is not the settings of a reproduction: {error}") from error
 

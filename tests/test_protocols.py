@@ -48,15 +48,22 @@ def test_method1_reaches_equilibrium_under_stress_control(cohesion, rolling):
     assert 0.6 < phi < 0.9
 
 
-def test_cell_mass_is_gilabert_s_and_borrows_the_size_of_a_larger_sample():
-    # Gilabert Sec. II A: M = 3/10 of the grain mass over L; the engine's default cell mass is the same
+def test_cell_mass_reads_gilabert_either_way_and_borrows_the_size_of_a_larger_sample():
+    # Gilabert Sec. II A: M = 3/10 of the grain mass (a mass, as Eq. 3 needs in 2D), or that over L
+    # (the paper's words), the engine's default cell mass; a sample borrows the M of a larger one
     r, positions, length = gilabert_gas(50, 0.36, 3, 1.0)
     sim = Simulation(ParticleState(positions, r, density=4.0 / np.pi), gilabert_law(),
                      cell=PeriodicCell((length, length)))
-    assert cell_mass(r, length) == pytest.approx(sim.cell.mass[0], rel=1e-12)
-    assert cell_mass(r, length, disks=200) == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
-    prepared = method1(50, law=gilabert_law(), seed=3, max_time=1.0, cell_mass_disks=200)
+    grain_mass = float(sim.particles.mass.sum())
+    assert cell_mass(r, length) == pytest.approx(0.3 * grain_mass, rel=1e-12)
+    assert cell_mass(r, length, disks=200) == pytest.approx(4.0 * 0.3 * grain_mass, rel=1e-12)
+    assert cell_mass(r, length, reading="per-length") == pytest.approx(sim.cell.mass[0], rel=1e-12)
+    assert cell_mass(r, length, disks=200, reading="per-length") == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
+    prepared = method1(50, law=gilabert_law(), seed=3, max_time=1.0, cell_mass_disks=200,
+                       cell_mass_reading="per-length")
     assert prepared.sim.cell.mass[0] == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
+    with pytest.raises(ParameterError, match="cell_mass = 'per-area' is not allowed: one of mass, per-length"):
+        cell_mass(r, length, reading="per-area")
 
 
 def test_method2_aggregates_into_one_cluster_in_equilibrium():

@@ -18,8 +18,8 @@ import pytest
 from engine import ParameterError
 from engine.cli import _print_reproduce
 from engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
-                              TABLE_VII, Case, Published, Reproduction, gilabert_sample, published, run_reproduction,
-                              summarize)
+                              TABLE_VII, Case, Published, Reproduction, gilabert_sample, published, resume_folder,
+                              run_reproduction, start_folder, summarize)
 
 PAPER = Path(__file__).resolve().parents[2] / "shared" / "papers" / "003_8b3722194af85a9b.txt"
 NUMBER = re.compile(r"\d+\.\d+")
@@ -150,6 +150,10 @@ def test_bad_input_is_refused_clearly():
         Reproduction("gilabert-method1", rolling_damping_ratio=-0.5)
     with pytest.raises(ParameterError, match="cell_mass_disks = 0 is not allowed: a whole number >= 1"):
         Reproduction("gilabert-method1", cell_mass_disks=0)
+    with pytest.raises(ParameterError, match="cell_mass = 'per-area' is not allowed: one of mass, per-length"):
+        Reproduction("gilabert-method1", cell_mass="per-area")
+    process = granlab("reproduce", "gilabert-method1", "--cell-mass", "per-area")
+    assert process.returncode == 2 and "invalid choice: 'per-area' (choose from 'mass', 'per-length')" in process.stderr
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
     assert process.returncode == 2 and "0 is not allowed: a whole number > 0" in process.stderr
     process = granlab("reproduce", "gilabert-table9")
@@ -237,3 +241,12 @@ def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     assert process.returncode == 2 and "holds a reproduction already: continue it with --resume" in process.stderr
     process = granlab("reproduce", "gilabert-method2", "--resume", str(tmp_path / "none"))
     assert process.returncode == 2 and "holds no reproduction (settings.json is missing)" in process.stderr
+
+
+def test_a_folder_from_before_the_cell_mass_readings_goes_on_with_the_reading_it_was_made_with(tmp_path):
+    folder = start_folder(tmp_path / "new", Reproduction("gilabert-method1", particles=30))
+    assert resume_folder(folder).cell_mass == "mass"
+    settings = json.loads((folder / "settings.json").read_text())
+    del settings["cell_mass"]
+    (folder / "settings.json").write_text(json.dumps(settings))
+    assert resume_folder(folder) == Reproduction("gilabert-method1", particles=30, cell_mass="per-length")

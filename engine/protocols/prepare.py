@@ -127,34 +127,49 @@ def gilabert_gas(count: int, solid_fraction: float, seed: int, diameter: float =
     return r, positions, length
 
 
-def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = None) -> float:
-    """Gilabert's generalized mass ``M`` of Eq. 3: 3/10 of the grain mass over the cell size ``L``
-    (Sec. II A), for a sample of ``disks`` disks (default: these) with the same radii and solid
-    fraction, at the density of the preparations (a disk of diameter ``a`` has mass 1).
+CELL_MASS_READINGS = ("mass", "per-length")
+"""Two readings of Gilabert's generalized mass ``M`` (Eq. 3, Sec. II A): ``mass``, 3/10 of the grain
+mass, a mass as Eq. 3 needs in 2D (its stresses are forces per length, its strain has no
+dimension); ``per-length``, 3/10 of the grain mass over the cell size ``L`` (the paper's words,
+which it calls "dimensionally correct": so they are for stresses per area, in 3D), in units of the
+largest diameter. The first reproduces Table III, the second compacts faster and ends looser and
+less coordinated (docs/gilabert.md, "The cohesive z gap")."""
 
-    ``M`` grows like ``sqrt(N)`` at a given solid fraction, and the strain acceleration of the cell
-    is ``(sigma_I - sigma_M) / M``: a small sample compacts faster than the paper's (and ends
-    looser and less coordinated, see docs/gilabert.md) unless it borrows the ``M`` of the
-    paper's size, ``sqrt(disks / N)`` times its own."""
+
+def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = None,
+              reading: str = "mass") -> float:
+    """Gilabert's generalized mass ``M`` of Eq. 3 by ``reading`` (:data:`CELL_MASS_READINGS`) for a
+    sample of ``disks`` disks (default: these) with the same radii and solid fraction, at the density
+    of the preparations (a disk of diameter ``a`` has mass 1).
+
+    ``M`` grows with the sample, like ``N`` (``mass``) or ``sqrt(N)`` (``per-length``), and the
+    strain acceleration of the cell is ``(sigma_I - sigma_M) / M``: a small sample compacts faster
+    than the paper's (and ends looser and less coordinated) unless it borrows the ``M`` of the
+    paper's size."""
     count = len(radii)
     disks = count if disks is None else disks
     if isinstance(disks, bool) or not isinstance(disks, (int, np.integer)) or disks < 1:
         raise ParameterError("cell_mass_disks", disks, "a whole number >= 1")
+    if reading not in CELL_MASS_READINGS:
+        raise ParameterError("cell_mass", reading, "one of " + ", ".join(CELL_MASS_READINGS))
     grain_mass = 4.0 / diameter ** 2 * float(np.sum(np.asarray(radii) ** 2))
-    return default_cell_mass(grain_mass, (length, length)) * math.sqrt(disks / count)
+    if reading == "mass":
+        return 0.3 * grain_mass * disks / count
+    return default_cell_mass(grain_mass, (length / diameter, length / diameter)) * math.sqrt(disks / count)
 
 
 def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
             seed: int = 0, diameter: float = 1.0, max_time: float = 2000.0, cell_mass_disks: int | None = None,
-            dt_safety: float = 0.3) -> Prepared:
+            dt_safety: float = 0.3, cell_mass_reading: str = "mass") -> Prepared:
     """Gilabert Sec. III A: a granular gas at ``solid_fraction`` in a periodic cell, at rest, brought
     to equilibrium under the isotropic ``pressure`` by stress control of the cell (Eq. 3), whose
-    generalized mass is that of a sample of ``cell_mass_disks`` disks (:func:`cell_mass`)."""
+    generalized mass is that of a sample of ``cell_mass_disks`` disks by ``cell_mass_reading``
+    (:func:`cell_mass`)."""
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
     r, positions, length = gilabert_gas(count, solid_fraction, seed, diameter)
     cell = PeriodicCell((length, length), control=("stress", "stress"), stress=(pressure, pressure),
-                        mass=cell_mass(r, length, diameter, cell_mass_disks))
+                        mass=cell_mass(r, length, diameter, cell_mass_disks, cell_mass_reading))
     sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi / diameter ** 2), law,
                      Integration(dt_safety=dt_safety), cell=cell)
     relaxation = relax(sim, pressure, max_time)
@@ -181,7 +196,7 @@ def touching_contacts(sim: Simulation) -> int:
 def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
             speed: float | None = None, seed: int = 0, diameter: float = 1.0, max_time: float = 4000.0,
             max_strain_rate: float = 1e-3, accelerated: bool = False, soft_kappa: float = 100.0,
-            cell_mass_disks: int | None = None, dt_safety: float = 0.3,
+            cell_mass_disks: int | None = None, dt_safety: float = 0.3, cell_mass_reading: str = "mass",
             on_stage: Callable[[str, Simulation], None] | None = None) -> Prepared:
     """Gilabert Sec. III B, for cohesive laws.
 
@@ -195,7 +210,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
 
     ``accelerated`` (series B): aggregate with soft contacts ``kappa = soft_kappa`` and then
     stiffen them slowly to the law's ``kappa`` before stage 2. ``max_time`` bounds each stage.
-    The cell's generalized mass is that of a sample of ``cell_mass_disks`` disks (:func:`cell_mass`).
+    The cell's generalized mass is that of a sample of ``cell_mass_disks`` disks by ``cell_mass_reading``
+    (:func:`cell_mass`).
     ``on_stage(name, sim)`` is called at the end of each stage (``aggregation``, ``relaxation``:
     the packing at ``P* = 0`` of Gilabert Table IV, ``compression``).
     """
@@ -213,8 +229,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     target_kn = law.normal_stiffness
     first_law = law.replace(normal_stiffness=soft_kappa * law.cohesion_force / diameter,
                             tangential_stiffness=soft_kappa * law.cohesion_force / diameter) if accelerated else law
-    cell = PeriodicCell((length, length), control=("fixed", "fixed"), mass=cell_mass(r, length, diameter,
-                                                                                    cell_mass_disks))
+    cell = PeriodicCell((length, length), control=("fixed", "fixed"),
+                        mass=cell_mass(r, length, diameter, cell_mass_disks, cell_mass_reading))
     sim = Simulation(particles, first_law, Integration(dt_safety=dt_safety), cell=cell)
     sim_time = 0.0
     # stage 1: aggregation at fixed size, until one cluster in equilibrium
