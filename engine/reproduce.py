@@ -183,7 +183,7 @@ class Reproduction:
     cell_mass: str = "mass"
 
     def __post_init__(self):
-        from .protocols.prepare import CELL_MASS_READINGS
+        from .protocols.prepare import check_cell_mass_reading
 
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
@@ -194,8 +194,7 @@ class Reproduction:
         if not self.max_time > 0:
             raise ParameterError("max_time", self.max_time, "a positive duration")
         nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
-        if self.cell_mass not in CELL_MASS_READINGS:
-            raise ParameterError("cell_mass", self.cell_mass, "one of " + ", ".join(CELL_MASS_READINGS))
+        check_cell_mass_reading(self.cell_mass)
 
     @property
     def cases(self) -> tuple[Case, ...]:

@@ -180,6 +180,11 @@ def cell_control_names(codes) -> tuple[str, str]:
     return tuple("none" if code == CELL_NONE else CELL_CONTROLS[code] for code in codes)
 
 
+def fixed_cell_control(periodic) -> tuple[str, ...]:
+    """The control of each axis of a cell of fixed size: what states that name none have."""
+    return tuple("fixed" if p else "none" for p in periodic)
+
+
 @dataclass(frozen=True)
 class Snapshot:
     """A copy of the state at one instant (safe to hand to another thread)."""

@@ -77,10 +77,14 @@ class _Copyable:
         return clone
 
 
+CELL_MASS_FRACTION = 0.3
+"""Gilabert's generalized mass of the cell is this fraction of the grain mass (Sec. II A)."""
+
+
 def default_cell_mass(total_mass: float, lengths) -> float:
     """Gilabert's generalized mass of the cell (Eq. 3, Sec. II A): 3/10 of the grain mass over the
     cell size ``sqrt(L_x L_y)``."""
-    return 0.3 * total_mass / math.sqrt(float(lengths[0]) * float(lengths[1]))
+    return CELL_MASS_FRACTION * total_mass / math.sqrt(float(lengths[0]) * float(lengths[1]))
 
 
 def _column(name: str, value, n: int, default: float, width: int | None = None) -> np.ndarray:

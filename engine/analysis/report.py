@@ -263,20 +263,25 @@ class _Clock:
         self._last = now
 
 
+def _load_on(net: st.Network, dof: np.ndarray) -> np.ndarray:
+    """The external load on the velocity components ``dof`` (-1: none), zero elsewhere."""
+    out = np.zeros(net.dof)
+    out[dof[dof >= 0]] = net.external[dof[dof >= 0]]
+    return out
+
+
 def load_increment(net: st.Network, load: str = "auto", seed: int = 0) -> tuple[np.ndarray, str]:
     """The load increment df_ext (one value per velocity component) and the name of its kind."""
     if load not in LOADS:
         raise ParameterError("load", load, f"one of {', '.join(LOADS)}")
-    walls = np.zeros(net.dof)
-    walls[net.wall_dof[net.wall_dof >= 0]] = net.external[net.wall_dof[net.wall_dof >= 0]]
+    walls = _load_on(net, net.wall_dof)
     if load == "walls" or (load == "auto" and np.any(walls != 0.0)):
         if not np.any(walls != 0.0):
             raise GranLabError("load 'walls' needs a force-controlled wall with a load; this state has none "
                                "(use load 'cell' for a cell under stress control, or 'random')")
         return walls / np.linalg.norm(walls), "walls"
     if load == "cell":
-        cell = np.zeros(net.dof)
-        cell[net.cell_dof[net.cell_dof >= 0]] = net.external[net.cell_dof[net.cell_dof >= 0]]
+        cell = _load_on(net, net.cell_dof)
         if not np.any(cell != 0.0):
             raise GranLabError("load 'cell' needs a periodic cell under stress control with a target stress; this "
                                "state has none (use load 'walls' or 'random')")

@@ -31,8 +31,8 @@ import numpy as np
 from .. import __version__
 from ..errors import GranLabError, OutputError
 from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
-from ..simulation import Simulation
-from ..state import STATUS_NAMES, ParticleState
+from ..simulation import Simulation, cell_control_names, fixed_cell_control
+from ..state import CELL_NONE, STATUS_NAMES, ParticleState
 from .outputs import occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
@@ -59,16 +59,16 @@ FRAME_OBSERVABLES = (("wall_position", "observables/walls/position"), ("wall_for
 def cell_control_codes(snap) -> list[int]:
     """The cell's control per axis as stored: the index in :data:`CELL_CONTROLS`, -1 where the axis is
     not periodic (a snapshot that names no control has a fixed cell)."""
-    names = snap.cell_control or tuple("fixed" if p else "none" for p in snap.periodic)
-    return [-1 if name == "none" else CELL_CONTROLS.index(name) for name in names]
+    names = snap.cell_control or fixed_cell_control(snap.periodic)
+    return [CELL_NONE if name == "none" else CELL_CONTROLS.index(name) for name in names]
 
 
 def cell_control_of(frame: dict, periodic) -> tuple[str, ...]:
     """The cell's control per axis of a frame of :func:`read_frame` (fixed in a run file written before
     the cell's control was stored)."""
     if "cell_control" not in frame:
-        return tuple("fixed" if p else "none" for p in periodic)
-    return tuple("none" if code < 0 else CELL_CONTROLS[code] for code in frame["cell_control"])
+        return fixed_cell_control(periodic)
+    return cell_control_names(frame["cell_control"])
 
 
 class RunFileError(GranLabError, OSError):

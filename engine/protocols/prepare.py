@@ -21,7 +21,8 @@ from ..errors import ParameterError
 from ..generate import radii, random_gas, square_lattice
 from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, positive
 from ..simulation import Simulation
-from ..state import STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState, default_cell_mass
+from ..state import (CELL_MASS_FRACTION, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState,
+                     default_cell_mass)
 from .equilibrium import EquilibriumReport, equilibrium, measured_pressure, relax
 
 
@@ -136,6 +137,13 @@ largest diameter. The first reproduces Table III, the second compacts faster and
 less coordinated (docs/gilabert.md, "The cohesive z gap")."""
 
 
+def check_cell_mass_reading(reading: str) -> str:
+    """``reading`` if it is one of :data:`CELL_MASS_READINGS`; a ParameterError naming them if not."""
+    if reading not in CELL_MASS_READINGS:
+        raise ParameterError("cell_mass", reading, "one of " + ", ".join(CELL_MASS_READINGS))
+    return reading
+
+
 def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = None,
               reading: str = "mass") -> float:
     """Gilabert's generalized mass ``M`` of Eq. 3 by ``reading`` (:data:`CELL_MASS_READINGS`) for a
@@ -150,11 +158,10 @@ def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = N
     disks = count if disks is None else disks
     if isinstance(disks, bool) or not isinstance(disks, (int, np.integer)) or disks < 1:
         raise ParameterError("cell_mass_disks", disks, "a whole number >= 1")
-    if reading not in CELL_MASS_READINGS:
-        raise ParameterError("cell_mass", reading, "one of " + ", ".join(CELL_MASS_READINGS))
+    check_cell_mass_reading(reading)
     grain_mass = 4.0 / diameter ** 2 * float(np.sum(np.asarray(radii) ** 2))
     if reading == "mass":
-        return 0.3 * grain_mass * disks / count
+        return CELL_MASS_FRACTION * grain_mass * disks / count
     return default_cell_mass(grain_mass, (length / diameter, length / diameter)) * math.sqrt(disks / count)
 
 
