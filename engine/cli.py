@@ -9,8 +9,8 @@
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
 - ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N]
-  [--out DIR | --resume DIR] [--json]``: Gilabert's preparation tables measured on Dask beside the
-  published values, each sample written to DIR as it finishes;
+  [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
+  on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
@@ -356,11 +356,18 @@ _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "fi
 
 def _reproduce(args) -> dict:
     from .reproduce import (PAPER_SIZE, Reproduction, finished_samples, resume_folder, run_reproduction,
-                            start_folder)
+                            start_folder, summarize_series)
     from .studies import text_progress
 
     given = {key: getattr(args, option[2:].replace("-", "_")) for key, option in _REPRODUCTION_OPTIONS.items()}
     given = {key: value for key, value in given.items() if value is not None}
+    if args.series:
+        options = [_REPRODUCTION_OPTIONS[key] for key in given] + (["--paper-size"] if args.paper_size else []) + \
+            [f"--{name}" for name in ("workers", "scheduler") if getattr(args, name) is not None]
+        if options:
+            raise GranLabError(f"--series summarises the folders' samples as they are and runs nothing: "
+                               f"drop {', '.join(options)}")
+        return summarize_series(args.table, args.series)
     if args.resume:
         reproduction = resume_folder(args.resume)
         if reproduction.name != args.table:
@@ -390,11 +397,17 @@ def _reproduce(args) -> dict:
 
 def _print_reproduce(result: dict) -> None:
     settings = result["settings"]
-    print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case "
-          f"(cell mass M: {settings['cell_mass']} reading, of {settings['cell_mass_disks']} disks), "
-          f"{result['wall_time_s']:.1f} s on {result['scheduler']} (samples' own times: "
-          f"{result['sample_wall_time_s']:.1f} s)")
-    if result["folder"]:
+    if "series" in result:
+        print(f"{result['reproduction']}, one series of "
+              + " + ".join(f"{s['folder']} ({s['samples']} samples of {s['particles']} disks in all cases)"
+                         for s in result["series"])
+              + f", cell mass M: {settings['cell_mass']} reading")
+    else:
+        print(f"{result['reproduction']}: {settings['samples']} samples of {settings['particles']} disks per case "
+              f"(cell mass M: {settings['cell_mass']} reading, of {settings['cell_mass_disks']} disks), "
+              f"{result['wall_time_s']:.1f} s on {result['scheduler']} (samples' own times: "
+              f"{result['sample_wall_time_s']:.1f} s)")
+    if result.get("folder"):
         print(f"  samples in {result['folder']}" + (f", {result['resumed']} of them from before"
                                                     if result["resumed"] else ""))
     print(f"    {'quantity':<14}{'measured (mean ± s.e.)':<26}{'published':<24}source")
@@ -618,6 +631,9 @@ def build_parser() -> argparse.ArgumentParser:
     folder.add_argument("--resume", metavar="DIR",
                         help="continue the reproduction in DIR (made by --out): run only the samples not there yet, "
                              "with DIR's settings")
+    folder.add_argument("--series", metavar="DIR", nargs="+",
+                        help="summarise the samples of these folders (made by --out, e.g. one of 1400 disks and one "
+                             "of 5600) as one series, I(k) averaged over all of them before the fit; runs nothing")
     reproduce.add_argument("--workers", type=_positive_int, help="local Dask workers (default: one per core)")
     reproduce.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
     reproduce.add_argument("--json", action="store_true", help="print one JSON object")

@@ -22,7 +22,8 @@ Units: the largest diameter ``a``, the mass of a disk of diameter ``a`` and ``F0
 A reproduction given a folder writes its settings there and each sample as it finishes
 (``settings.json``, ``samples/KEY.json``); run again on that folder it runs only the samples not
 yet there, so a reproduction of hours survives an interruption. With method 2, ``d_F`` and ``xi``
-are also fitted to ``I(k)`` averaged over the samples of a case, as Gilabert does (Sec. V).
+are also fitted to ``I(k)`` averaged over the samples of a case, as Gilabert does (Sec. V), and
+the folders of several sizes can be summarised as one series (:func:`summarize_series`).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .analysis.fractal import FitError, average_intensity, fit_structure
+from .analysis.fractal import FitError, average_series_intensity, fit_structure
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
@@ -301,20 +302,57 @@ def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
 
 def averaged_fit(rows: list[dict], prefix: str) -> dict:
     """Eq. 28 fitted to ``I(k)`` averaged over the samples of ``rows`` (``prefix`` "_0": at
-    ``P* = 0``), with the samples' mean grid solid fraction, in units of the diameter ``a = 1``."""
+    ``P* = 0``), with the samples' mean grid solid fraction, in units of the diameter ``a = 1``.
+    Rows of a series (:func:`summarize_series`) carry their ``particles``: each size is averaged
+    on its own bins, the larger boxes alone below the smaller ones' (see
+    :func:`engine.analysis.fractal.average_series_intensity`)."""
     have = [r for r in rows if r.get(f"k{prefix}")]
     fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "error": None}
     if not have:
         fit["error"] = "no sample's I(k)"
         return fit
+    sizes = sorted({r.get("particles") for r in have}, key=str)
+    groups = [[r for r in have if r.get("particles") == size] for size in sizes]
     try:
-        k, intensity = average_intensity([r[f"k{prefix}"] for r in have], [r[f"intensity{prefix}"] for r in have])
+        k, intensity = average_series_intensity([([r[f"k{prefix}"] for r in group],
+                                                  [r[f"intensity{prefix}"] for r in group]) for group in groups])
         result = fit_structure(k, intensity, float(np.mean([r[f"grid_phi{prefix}"] for r in have])), diameter=1.0)
     except (FitError, ParameterError) as error:
         fit["error"] = str(error)
         return fit
     fit.update(d_F=result.d_F, d_F_error=result.d_F_error, xi=result.xi, xi_error=result.xi_error)
     return fit
+
+
+SERIES_MAY_DIFFER = ("particles", "samples", "first_seed", "cell_mass_disks")
+"""Settings in which the folders of one series may differ: its sizes and seeds."""
+
+
+def summarize_series(table: str, folders) -> dict:
+    """The finished samples of several reproduction folders of ``table``, summarised as one series
+    (Gilabert's Table VII: 4 samples of 1400 disks and 2 of 5600 in one fit). Nothing is run. The
+    folders may differ only in :data:`SERIES_MAY_DIFFER`."""
+    if len({Path(folder).resolve() for folder in folders}) < len(folders):
+        raise GranLabError(f"a folder is named twice in --series {' '.join(map(str, folders))}: each once")
+    reproductions = [resume_folder(folder) for folder in folders]
+    first = reproductions[0]
+    rows, series = [], []
+    for folder, reproduction in zip(folders, reproductions):
+        if reproduction.name != table:
+            raise GranLabError(f"{folder} holds {reproduction.name}, not {table}")
+        differ = [key for key, value in asdict(reproduction).items()
+                  if key not in SERIES_MAY_DIFFER and value != getattr(first, key)]
+        if differ:
+            raise GranLabError(f"{folder} differs from {folders[0]} in {', '.join(differ)}: a series may differ "
+                               f"only in {', '.join(SERIES_MAY_DIFFER)}")
+        done = list(finished_samples(folder).values())
+        rows += [{**row, "particles": reproduction.particles} for row in done]
+        series.append({"folder": str(folder), "particles": reproduction.particles, "samples": len(done)})
+    if not rows:
+        raise GranLabError(f"no finished sample in {', '.join(map(str, folders))}")
+    summary = summarize(first, rows)
+    summary["series"] = series
+    return summary
 
 
 def sample_key(case: Case, seed: int) -> str:

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -19,7 +20,7 @@ from engine import ParameterError
 from engine.cli import _print_reproduce
 from engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
                               TABLE_VII, Case, Published, Reproduction, gilabert_sample, published, resume_folder,
-                              run_reproduction, start_folder, summarize)
+                              run_reproduction, sample_key, start_folder, summarize)
 
 PAPER = Path(__file__).resolve().parents[2] / "shared" / "papers" / "003_8b3722194af85a9b.txt"
 NUMBER = re.compile(r"\d+\.\d+")
@@ -196,6 +197,76 @@ def test_intensities_of_boxes_of_different_sizes_are_averaged_on_common_bins():
         average_intensity([np.geomspace(0.1, 1.0, 5), np.geomspace(2.0, 9.0, 5)], [np.ones(5), np.ones(5)])
     with pytest.raises(ParameterError, match="at least 2 such bins per sample"):
         average_intensity([np.geomspace(0.1, 1.0, 5)], [np.zeros(5)])
+
+
+def test_a_series_of_two_box_sizes_reaches_below_the_smaller_box_with_the_larger_alone():
+    from engine.analysis.fractal import average_intensity, average_series_intensity, structure_model
+
+    phi, d_F, xi, ell, constant = 0.36, 1.6, 8.0, 0.5, 2e-3
+    small, large = (np.geomspace(2.0 * math.pi / length, 6.0, 40) for length in (42.0, 84.0))
+
+    def model(k):
+        return structure_model(k, phi, d_F, xi, ell, constant)
+
+    # 4 samples of the small box with the model's intensity, 2 of the large one with 1.3 times it
+    k, mean = average_series_intensity([([small] * 4, [model(small)] * 4), ([large] * 2, [1.3 * model(large)] * 2)])
+    below = k < small[0]
+    assert k[0] == large[0] and np.all(np.isin(k[below], large)) and np.all(np.isin(k[~below], small))
+    assert mean[below] == pytest.approx(1.3 * model(k[below]), rel=1e-9)
+    assert mean[~below] == pytest.approx(1.1 * model(k[~below]), rel=2e-3)  # (4 + 2 * 1.3) / 6
+    one = average_intensity([small, small * 1.02], [model(small), model(small * 1.02)])
+    assert average_series_intensity([([small, small * 1.02], [model(small), model(small * 1.02)])])[1] == \
+        pytest.approx(one[1], rel=1e-12)
+
+
+def _series_folder(folder, particles, samples, length, **settings):
+    """A method-2 folder of ``samples`` per case whose I(k) is Eq. 28's in boxes ``length`` wide."""
+    from engine.analysis.fractal import structure_model
+    from engine.reproduce import _write_json
+
+    reproduction = Reproduction("gilabert-method2", particles=particles, samples=samples, **settings)
+    start_folder(folder, reproduction)
+    k = np.geomspace(2.0 * math.pi / length, 2.0 * math.pi, 30)
+    intensity = structure_model(k, PHI_I, 1.6, 3.0, 0.4, 0.0).tolist()
+    for case in reproduction.cases:
+        for seed in range(samples):
+            row = {"case": case.label, **asdict(case), "seed": seed, "error": None, "equilibrated": True,
+                   "balanced_0": True, "wall_time_s": 1.0, "k_0": k.tolist(), "intensity_0": intensity,
+                   "grid_phi_0": PHI_I, "k": k.tolist(), "intensity": intensity, "grid_phi": PHI_I,
+                   **{q: 1.0 for q in ("phi_0", "z_0", "d_F_0", "xi_0", "phi", "z", "d_F", "xi", "hole_radius_w")}}
+            _write_json(folder / "samples" / f"{sample_key(case, seed)}.json", row)
+    return folder
+
+
+def test_folders_of_two_sizes_are_summarised_as_one_series(tmp_path):
+    small = _series_folder(tmp_path / "1400", 1400, 4, 42.0)
+    large = _series_folder(tmp_path / "5600", 5600, 2, 84.0, cell_mass_disks=5600)
+    process = granlab("reproduce", "gilabert-method2", "--series", str(small), str(large), "--json")
+    assert process.returncode == 0, process.stderr
+    result = json.loads(process.stdout)
+    assert [(s["particles"], s["samples"]) for s in result["series"]] == [(1400, 8), (5600, 4)]
+    for case in result["cases"]:
+        assert case["completed"] == 6
+        for fit in case["averaged_fit"].values():
+            assert fit["samples"] == 6 and fit["d_F"] == pytest.approx(1.6, abs=1e-3)
+            assert fit["xi"] == pytest.approx(3.0, rel=1e-3)
+    printed = granlab("reproduce", "gilabert-method2", "--series", str(small), str(large)).stdout
+    assert f"{small} (8 samples of 1400 disks in all cases) + {large} (4 samples of 5600 disks" in printed
+    assert "d_F_0 <I(k)>  1.600" in printed
+
+    other = _series_folder(tmp_path / "longer", 1400, 1, 42.0, max_time=1000.0)
+    process = granlab("reproduce", "gilabert-method2", "--series", str(small), str(other))
+    assert process.returncode == 2 and f"{other} differs from {small} in max_time: a series may differ only in " \
+        "particles, samples, first_seed, cell_mass_disks" in process.stderr
+    process = granlab("reproduce", "gilabert-method1", "--series", str(small))
+    assert process.returncode == 2 and "holds gilabert-method2, not gilabert-method1" in process.stderr
+    process = granlab("reproduce", "gilabert-method2", "--series", str(small), "--samples", "3", "--workers", "1")
+    assert process.returncode == 2 and "runs nothing: drop --samples, --workers" in process.stderr
+    process = granlab("reproduce", "gilabert-method2", "--series", str(small), str(tmp_path / "1400" / "."))
+    assert process.returncode == 2 and "a folder is named twice" in process.stderr
+    empty = start_folder(tmp_path / "empty", Reproduction("gilabert-method2"))
+    process = granlab("reproduce", "gilabert-method2", "--series", str(empty))
+    assert process.returncode == 2 and f"no finished sample in {empty}" in process.stderr
 
 
 def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):

@@ -290,6 +290,29 @@ def average_intensity(ks, intensities) -> tuple[np.ndarray, np.ndarray]:
     return grid, mean
 
 
+def average_series_intensity(groups) -> tuple[np.ndarray, np.ndarray]:
+    """``I(k)`` averaged over a series whose samples come in boxes of several sizes, as Gilabert's
+    Table VII fits 4 samples of 1400 disks and 2 of 5600 together. ``groups``: per size, the
+    ``(ks, intensities)`` of its samples, each averaged by :func:`average_intensity`. The bins are
+    the coarsest size's, extended below its first bin by the bins of the larger boxes, which alone
+    reach there; each bin is the mean over the samples whose size covers it."""
+    averaged = sorted(((*average_intensity(ks, intensities), len(ks)) for ks, intensities in groups),
+                      key=lambda group: -group[0][0])
+    if not averaged:
+        raise ParameterError("samples", 0, "at least one sample's I(k)")
+    high = min(k[-1] for k, _, _ in averaged)
+    grid = averaged[0][0][averaged[0][0] <= high]
+    for k, _, _ in averaged[1:]:
+        grid = np.concatenate([k[k < grid[0]], grid])
+    log_grid = np.log(grid)
+    total, samples = np.zeros_like(grid), np.zeros_like(grid)
+    for k, intensity, count in averaged:
+        covered = (grid >= k[0]) & (grid <= k[-1])
+        total[covered] += count * np.exp(np.interp(log_grid[covered], np.log(k), np.log(intensity)))
+        samples[covered] += count
+    return grid, total / samples
+
+
 # ------------------------------------------------------------------------------------- the fit
 
 def structure_model(k, phi: float, d_F: float, xi: float, ell: float, constant: float) -> np.ndarray:
