@@ -10,6 +10,7 @@ The functions below turn a result into what the plots and the 3D scene draw.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from html import escape
 from dataclasses import dataclass
@@ -45,7 +46,9 @@ class AnalysisRunner:
         self._on_done = on_done
         self.busy = False
 
-    def request(self, state: PackingState, kind: str) -> None:
+    def request(self, state: PackingState | Callable[[], PackingState], kind: str) -> None:
+        """Analyse ``state`` (or the state a function returns: a frame read from a file is read on
+        the analysis thread too)."""
         self.busy = True
         self._pool.submit(self._run, state, kind)
 
@@ -56,10 +59,12 @@ class AnalysisRunner:
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
 
-    def _run(self, state: PackingState, kind: str) -> None:
+    def _run(self, state, kind: str) -> None:
         try:
+            state = state() if callable(state) else state
             report, error = analyze(state, kind), ""
         except (GranLabError, ValueError, MemoryError) as failure:
+            state = state if isinstance(state, PackingState) else None
             report, error = None, str(failure)
         with self._lock:
             self._seq += 1

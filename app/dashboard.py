@@ -38,6 +38,8 @@ REPLAY = "replay"
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
+JOB_KINDS = ("save", "load", "record")
+"""The file jobs, each shown beside its button while it runs (:mod:`app.jobs`)."""
 PANES = ("Key plots", "More plots", "About this preset", "Analysis")
 HEADER_HEIGHT = 58
 HEADER_NOTES = ("preset", "run", "speed")
@@ -83,6 +85,8 @@ class Dashboard:
         self._analysis_seen = 0
         self._legend_key = None
         self._replay_shown = None
+        self._settings_shown = None
+        self._pending_shown: set[str] = set()
         self.notes: dict[str, pn.pane.HTML] = {}
         self._note_shown: dict[str, float] = {}
         self._build_widgets()
@@ -143,6 +147,9 @@ class Dashboard:
         self.particles = W.IntInput(name="Disks N", value=256, css_classes=["particles-input"], **wide)
         self.seed = W.IntInput(name="Seed", value=0, css_classes=["seed-input"], **wide)
         self.apply_reset = W.Button(name="Apply N and seed (restart)", css_classes=["apply-reset-button"], **wide)
+        self.cancel_pending = W.Button(name="Cancel the waiting changes", css_classes=["cancel-pending-button"],
+                                       visible=False, **wide)
+        self.fit_now = W.Button(name="Fit the strain from the next cycle", css_classes=["fit-now-button"], **wide)
         self.color = W.Select(name="Colour disks by", options=list(COLOR_FIELDS), value=self.scene.color_field,
                               css_classes=["color-select"], **wide)
         self.watch = W.TextInput(name="Watch a contact: disks i j (or click a disk)", placeholder="e.g. 3 7",
@@ -160,6 +167,7 @@ class Dashboard:
         self.record_seconds = W.FloatInput(name="of the last (simulated time)", value=20.0, step=5.0,
                                            css_classes=["record-seconds"], **wide)
         self.record = W.Button(name="Record movie", css_classes=["record-button"], **wide)
+        self.job_rows = {kind: self._job_row(kind) for kind in JOB_KINDS}
         self.timeline = W.IntSlider(name="Frame", start=1, end=2, value=1, css_classes=["replay-slider"],
                                     sizing_mode="stretch_width")
 
@@ -181,6 +189,8 @@ class Dashboard:
         self.settings_widgets = live + [(self.damping, "damping_ratio"), (self.friction, "friction"),
                                         (self.no_sliding, "friction"), (self.particles, "particles"),
                                         (self.seed, "seed")]
+        self.cancel_pending.on_click(lambda e: self._command("cancel_pending"))
+        self.fit_now.on_click(lambda e: self._command("fit_from_now"))
         self.apply_reset.on_click(lambda e: self._command("apply", changes={"particles": self.particles.value,
                                                                              "seed": self.seed.value}))
         self.color.param.watch(self._color, "value")
@@ -196,6 +206,27 @@ class Dashboard:
 
     def _control(self, key: str, value) -> None:
         self._command("apply", changes={key: value})
+
+    def _job_row(self, kind: str) -> pn.Row:
+        """What a file job is doing ("saving run1.h5… 40 %") and its Cancel button, shown while it runs."""
+        text = pn.pane.HTML("", css_classes=[f"job-{kind}"], sizing_mode="stretch_width", margin=(8, 4, 0, 10))
+        cancel = pn.widgets.Button(name="Cancel", css_classes=[f"cancel-{kind}"], width=70, margin=(4, 10, 4, 0))
+        cancel.on_click(lambda e: self._command("cancel", kind=kind))
+        return pn.Row(text, cancel, visible=False, sizing_mode="stretch_width")
+
+    def _show_jobs(self, jobs: list[dict]) -> list[str]:
+        """Each running job beside its button; returns its short form for the readout strip."""
+        running = {job["kind"]: job for job in jobs}
+        shown = []
+        for kind, row in self.job_rows.items():
+            job = running.get(kind)
+            row.visible = job is not None and not self.viewer
+            if job is None:
+                continue
+            text = f"{job['label']}… {100 * job['progress']:.0f} %"
+            row[0].object = f"<div style='font-size:12px;color:#8a5a00'>{escape(text)} ({job['seconds']:.0f} s)</div>"
+            shown.append(text)
+        return shown
 
     def _command(self, command: str, **payload) -> None:
         if self._syncing or self.viewer:
@@ -306,7 +337,12 @@ class Dashboard:
         self._pull(status)
         self._expire_notes()
         self._messages(status)
+        settings_key = repr((status.get("settings"), status.get("pending")))
+        if settings_key != self._settings_shown:  # another tab's change, a change that waited, a refusal
+            self._settings_shown = settings_key
+            self._sync(status)
         self._show_status(status)
+        self._show_pending(status)
         self._update_analysis()
         self.load_name.options = self.engine.saved_files()
 
@@ -354,9 +390,29 @@ class Dashboard:
             if message.level == "error" and message.control in CONTROL_LABELS:
                 self._sync(status)
 
+    def _show_pending(self, status: dict) -> None:
+        """Beside each control whose change waits: the value it will take, and in how long."""
+        pending = status.get("pending") or {}
+        if not pending and not self._pending_shown:
+            return
+        left = float(status.get("pending_at", 0.0)) - float(status.get("time", 0.0))
+        pace = float(status.get("speed_achieved", 0.0)) * float(status.get("cycle_time", 0.0))
+        when = f"in {left / pace:.0f} s" if pace > 0 else "when the run goes on"
+        for key in self._pending_shown - set(pending):
+            self.notes[key].visible = False
+        for key, value in pending.items():
+            if key in self.notes:
+                shown = "∞" if value == "inf" else (f"{value:g}" if isinstance(value, (int, float)) else value)
+                self.notes[key].object = _note("warning", f"from {status.get('pending_from', 'later')}: "
+                                                          f"{CONTROL_LABELS.get(key, key)} = {shown} ({when})")
+                self.notes[key].visible = True
+                self._note_shown.pop(key, None)
+        self._pending_shown = set(pending)
+        self.cancel_pending.visible = bool(pending) and not self.viewer
+
     def _show_status(self, status: dict) -> None:
         state = status.get("state", "")
-        self.play.name = "Pause" if state == "running" else "Play"
+        self.play.name = "Pause" if state in ("running", "stepping") else "Play"
         if state == "error" and not self.notes["run"].visible:
             self._note("run", "error", status.get("error", ""))
         unit = status.get("clock_unit", "")
@@ -375,9 +431,12 @@ class Dashboard:
                  "load": lambda v: f"load = {v:.2f} μF_n"}
         parts += [shown[key](value) for key, value in readout.items() if key in shown]
         achieved = status.get("speed_achieved", 0.0)
+        if state == "stepping":
+            state = f"stepping… {100 * status.get('step_progress', 0.0):.0f} %"
         parts.append(f"{achieved:.2g} {unit.split()[-1]}/s" if state == "running" and unit else state)
         if state == "running":
             parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
+        parts += [f"<span style='color:#8a5a00'>{escape(job)}</span>" for job in self._show_jobs(status.get("jobs", []))]
         self.readout.object = ("<div style='font-size:14px;line-height:1.3;padding:2px 0 0 10px;white-space:nowrap'>" +
                                " · ".join(p for p in parts if p) + "</div>")
         scene = self.scene.state()
@@ -444,6 +503,7 @@ class Dashboard:
             else:
                 widget.value = value
         self.apply_reset.visible = "particles" in used
+        self.fit_now.visible = "strain-per-cycle" in getattr(cls, "plots", ()) and replay is None and not self.viewer
         for group, keys in self.groups.items():
             group.visible = bool(used & keys)
         self.no_controls.visible = not used
@@ -462,7 +522,8 @@ class Dashboard:
 
         loading = pn.Column(pn.pane.HTML("<b>Loading</b>"), *labelled(self.phase, "phase"),
                             *labelled(self.amplitude, "amplitude"), *labelled(self.pressure, "pressure"),
-                            *labelled(self.period, "period"), sizing_mode="stretch_width")
+                            *labelled(self.period, "period"), self.cancel_pending, self._note_pane("pending"),
+                            self.fit_now, self._note_pane("fit"), sizing_mode="stretch_width")
         contacts = pn.Column(pn.pane.HTML("<b>Contacts</b>"), self.friction, *labelled(self.no_sliding, "friction"),
                              *labelled(self.model, "tangential_model"), *labelled(self.damping, "damping_ratio"),
                              *labelled(self.rolling_friction, "rolling_friction"),
@@ -481,11 +542,13 @@ class Dashboard:
                          self._note_pane("watch"), sizing_mode="stretch_width")
         files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"),
                           *labelled(self.frames_kept, "frames_per_cycle"), self.save_name, self.save,
-                          self._note_pane("save"), self.load_name, self.load, self._note_pane("load"),
-                          self.record_name, self.record_seconds, self.record, self._note_pane("record"),
+                          self.job_rows["save"], self._note_pane("save"), self.load_name, self.load,
+                          self.job_rows["load"], self._note_pane("load"), self.record_name, self.record_seconds,
+                          self.record, self.job_rows["record"], self._note_pane("record"),
                           sizing_mode="stretch_width")
         if self.viewer:
             files.visible = False
+            self.fit_now.visible = False
             for widget in (self.preset, self.play, self.step, self.reset, self.speed, self.apply_reset, self.color,
                            self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
                 widget.disabled = True

@@ -16,38 +16,36 @@ stall it, and it leaves the other core to them.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
-import os
 import queue
 import re
-import tempfile
 import threading
 import time
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numba
 import numpy as np
 
 from engine.analysis.report import ANALYSES
-from engine.analysis.packing import packing_stats
-from engine.analysis.states import PackingState, detect_format, read_state, read_states
+from engine.analysis.states import PackingState
 from engine.errors import DivergenceError, GranLabError, ParameterError
-from engine.io import h5md
 from engine.io.jsonsafe import jsonable
 from engine.io.outputs import free_name, occupied
 from engine.params import positive
 from engine.protocols.measures import pair_label
-from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings, strain_fit
+from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
 from engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
 from .drawing import COLOR_FIELDS, SceneFrame
 from .frames import FrameData, build_frame
+from .jobs import JobOutcome, Jobs
+from .replay import Replay, read_replay, read_time_limit, write_lab_movie, write_run
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_MIB = 64.0
@@ -83,153 +81,8 @@ def new_file(data_dir: Path, name: str, suffix: str = ".h5") -> Path:
     return path
 
 
-def partial_file(path: Path) -> Path:
-    """A new hidden file beside ``path`` to write into before renaming it to ``path``: made
-    exclusively with a random name (a link planted in the data folder is never followed) and
-    ending in ``path``'s suffix (a movie's format follows it)."""
-    handle, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".part" + path.suffix)
-    os.close(handle)
-    return Path(name)
-
-
 def settings_json(settings: LabSettings) -> str:
     return json.dumps(jsonable(dataclasses.asdict(settings)))
-
-
-class Replay:
-    """A file played back on a timeline: its frames, and the series up to the frame shown.
-
-    A GranLab run file gives its energy (and a lab run the lab's series, with the settings of
-    each frame). Another code's packing (a LAMMPS dump, with the contacts of ``STEM-contacts.dump``
-    beside it when there is one; an extended XYZ file; any H5MD file) gives the coordination z and
-    the solid fraction Φ of each frame; its frames are timed by the file's times, else its
-    timesteps, else their order."""
-
-    title = "Replay"
-    controls: tuple[str, ...] = ()
-
-    def __init__(self, path: Path):
-        self.path = path
-        self.name = f"replay:{path.name}"
-        self.contacts = None
-        if detect_format(path) == "h5md" and _is_run_file(path):
-            self._read_run(path)
-        else:
-            self._read_packing(path)
-        self._fit: tuple[int, dict | None] = (-1, None)
-        self.index = 0
-
-    def _read_run(self, path: Path) -> None:
-        with h5md.open_run(path) as f:
-            self.count = h5md.frame_count(f)
-            if self.count == 0:
-                raise h5md.RunFileError(f"{path.name} holds no complete frame to replay")
-            params = h5md.parameters(f)
-            walls = h5md.walls_from_json(params["walls_json"])
-            self.normals = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
-            self.frames = [h5md.read_frame(f, k) for k in range(self.count)]
-            fields = tuple(x.decode() for x in f["observables/energy"].attrs["fields"])
-            energy = f["observables/energy/value"][: self.count]
-            lab = h5md.lab_series(f)
-        protocol = json.loads(params.get("protocol_json", "{}"))
-        self.times = np.array([frame["time"] for frame in self.frames])
-        self.of = protocol.get("lab_preset") if protocol.get("lab_preset") in PRESETS and lab else None
-        span = float(self.times[-1] - self.times[0])
-        self.clock_unit = protocol.get("clock_unit", "tens of frames")
-        self.cycle_time = float(protocol.get("cycle_time", 10.0 * span / max(1, self.count - 1) or 1.0))
-        settings = self.settings(0) or {}
-        self.speed = float(settings.get("speed", 1.0)) if isinstance(settings.get("speed"), (int, float)) else 1.0
-        steps = np.array([frame["step"] for frame in self.frames], dtype=float)
-        self.series: dict[str, tuple[tuple[str, ...], np.ndarray]] = {
-            "replay": (("t", "step") + fields, np.column_stack([self.times, steps, energy]))}
-        self.series.update(lab)
-        self.plot = "replay-energy"
-        self.time_label = "t"
-        self.readouts = None
-        self.watched = [tuple(pair) for pair in protocol.get("watched", [])]
-        self.watched_labels = list(protocol.get("watched_labels", []))
-
-    def _read_packing(self, path: Path) -> None:
-        contacts = path.with_name(f"{path.stem}-contacts{path.suffix}")
-        self.contacts = contacts if detect_format(path) == "lammps" and contacts.is_file() else None
-        states = read_states(path, contacts=self.contacts)
-        self.count = len(states)
-        self.normals = np.zeros((0, 2))
-        self.frames = [_packing_frame(k, state) for k, state in enumerate(states)]
-        times = np.array([state.time for state in states], dtype=float)
-        steps = np.array([state.step for state in states], dtype=float)
-        frames = np.arange(1, self.count + 1, dtype=float)
-        increasing = [bool(self.count == 1 or np.all(np.diff(t) > 0)) for t in (times, steps)]
-        self.time_label = "t" if increasing[0] and times.any() else ("timestep" if increasing[1] else "frame")
-        self.times = {"t": times, "timestep": steps, "frame": frames}[self.time_label]
-        self.of = None
-        self.clock_unit = "tens of frames"
-        span = float(self.times[-1] - self.times[0])
-        self.cycle_time = 10.0 * span / max(1, self.count - 1) or 1.0
-        self.speed = 1.0
-        stats = [packing_stats(state) for state in states]
-        self.readouts = [{"phi": s.phi, "z": s.z} for s in stats]
-        self.series = {"replay": (("t", "step", "frame", "z", "phi"),
-                                  np.column_stack([self.times, steps, frames, [s.z for s in stats],
-                                                   [s.phi for s in stats]]))}
-        self.plot = "replay-structure"
-        self.watched, self.watched_labels = [], []
-
-    def _strain_fit(self, until: float) -> dict | None:
-        """The strain fit of the cycles recorded up to ``until``, as the preset showed it."""
-        if "cycles" not in self.series or self.of is None:
-            return None
-        columns, rows = self.series["cycles"]
-        count = int(np.count_nonzero(rows[:, columns.index("t")] <= until))
-        if self._fit[0] != count:  # status is read at every frame shown; the fit changes only with a cycle
-            pairs = list(zip(rows[:count, columns.index("cycle")].astype(int), rows[:count, columns.index("gamma")]))
-            self._fit = (count, strain_fit(pairs, getattr(PRESETS[self.of], "reference_cycle", 0)))
-        return self._fit[1]
-
-    def settings(self, index: int) -> dict | None:
-        text = self.frames[index].get("lab_settings_json")
-        return json.loads(text) if text else None
-
-    def data(self) -> FrameData:
-        return FrameData.from_run_frame(self.frames[self.index], self.normals)
-
-    def rows(self, name: str, after: float, until: float) -> np.ndarray:
-        """Rows of series ``name`` with ``after < t <= until``."""
-        columns, rows = self.series[name]
-        t = rows[:, columns.index("t")]
-        return rows[(t > after) & (t <= until)]
-
-    def status(self) -> dict:
-        frame = self.frames[self.index]
-        status = {"preset": self.name, "title": f"Replay of {self.path.name}",
-                  "stage": f"frame {self.index + 1} of {self.count}", "time": float(self.times[self.index]),
-                  "time_label": self.time_label, "step": frame["step"],
-                  "particles": int(frame["position"].shape[0]), "settings": self.settings(self.index),
-                  "clock_unit": self.clock_unit, "cycle_time": self.cycle_time, "speed": self.speed, "window": 0.0,
-                  "watched": [list(pair) for pair in self.watched], "watched_labels": self.watched_labels,
-                  "strain": self._strain_fit(frame["time"]),
-                  "replay": {"of": self.of, "frame": self.index, "frames": self.count, "plot": self.plot,
-                             "start": float(self.times[0]), "end": float(self.times[-1])}}
-        if self.readouts is not None:
-            status["readout"] = self.readouts[self.index]
-        return status
-
-
-def _is_run_file(path: Path) -> bool:
-    with h5md.open_run(path) as f:
-        return h5md.is_run_file(f)
-
-
-def _packing_frame(index: int, state: PackingState) -> dict:
-    """A frame of another code's packing as :meth:`FrameData.from_run_frame` reads it (no walls;
-    the disks do not turn)."""
-    c = state.contacts
-    return {"index": index, "time": state.time, "step": state.step, "position": state.positions,
-            "radius": state.radii, "angle": np.zeros(state.disks), "edges": state.box_lengths,
-            "boundary": ["periodic" if p else "none" for p in state.periodic],
-            "contacts": {"pair": np.column_stack([c.i, c.j]), "image": c.image, "status": c.status,
-                         "normal_force": c.normal_force, "tangential_force": c.tangential_force,
-                         "surface_gap": c.surface_gap}}
 
 
 class LabEngine:
@@ -267,7 +120,8 @@ class LabEngine:
         self._anchor = (time.perf_counter(), 0.0)
         self._thread = threading.Thread(target=self._loop, name="granlab-engine", daemon=True)
         self.analysis = AnalysisRunner(on_done=self._analysis_done)
-        self._recorder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="granlab-record")
+        self.jobs = Jobs(on_done=lambda outcome: self.submit("job_done", outcome=outcome))
+        self._stepping: float | None = None
         settings = preset_settings(preset, **changes)
         if wait_for_tab:
             self._warm_up(preset, settings)
@@ -292,7 +146,7 @@ class LabEngine:
         self.submit("wake")
         self._thread.join(timeout=10)
         self.analysis.close()
-        self._recorder.shutdown(wait=True, cancel_futures=True)
+        self.jobs.close()
 
     @property
     def alive(self) -> bool:
@@ -333,16 +187,21 @@ class LabEngine:
 
     def saved_files(self) -> list[str]:
         """The files of the data folder a replay can show: run files and H5MD files, LAMMPS dumps
-        of atoms (not their ``-contacts`` dumps), extended XYZ files."""
+        of atoms (not their ``-contacts`` dumps), extended XYZ files; not the hidden files a save
+        writes into before it is complete."""
         return sorted(path.name for path in self.data_dir.iterdir() if path.suffix in REPLAY_SUFFIXES
-                      and not path.stem.endswith("-contacts")) if self.data_dir.is_dir() else []
+                      and not path.stem.endswith("-contacts") and not path.name.startswith("."))  \
+            if self.data_dir.is_dir() else []
 
     # ------------------------------------------------------------------ the thread
     def _loop(self) -> None:
         numba.set_num_threads(1)
         last_publish = time.perf_counter()
         while not self._stop.is_set():
-            wait = self._run_chunk() if self.running else 0.05
+            if self._stepping is not None:
+                wait = self._step_chunk()
+            else:
+                wait = self._run_chunk() if self.running else 0.05
             self._drain(wait)
             now = time.perf_counter()
             if now - last_publish >= self.frame_interval:
@@ -365,7 +224,7 @@ class LabEngine:
     def _execute(self, command: str, payload: dict, submitted: float) -> None:
         control = {"apply": next(iter(payload.get("changes", {})), ""), "watch": "watch", "watch_disk": "watch",
                    "save": "save", "load": "load", "record": "record", "analyze": "analysis",
-                   "preset": "preset", "seek": "replay"}.get(command, "run")
+                   "preset": "preset", "seek": "replay", "cancel": payload.get("kind", "run")}.get(command, "run")
         try:
             if command == "apply":
                 self._apply(payload["changes"])
@@ -383,15 +242,24 @@ class LabEngine:
                     self.waiting, self.running = False, True
                     self._switch(make_preset(self._preset_name(), self._settings()))
             elif command == "play":
-                self.running, self.error = True, ""
+                self.running, self.error, self._stepping = True, "", None
                 if isinstance(self.source, Replay) and self.source.index == self.source.count - 1:
                     self._seek(0)
                 self._reanchor()
             elif command == "pause":
-                self.running = False
+                self.running, self._stepping = False, None
             elif command == "step":
                 self.running = False
                 self._step_once()
+            elif command == "cancel_pending":
+                self._info(self._preset_only("controls").cancel_pending(), "pending")
+            elif command == "fit_from_now":
+                self._info(self._preset_only("fit").fit_from_now(), "fit")
+            elif command == "cancel":
+                if self.jobs.cancel(payload["kind"]) is None:
+                    self._info("nothing to cancel", payload["kind"])
+            elif command == "job_done":
+                self._job_done(payload["outcome"])
             elif command == "seek":
                 self.running = False
                 self._seek(int(payload["index"]))
@@ -419,7 +287,7 @@ class LabEngine:
     def _preset_only(self, what: str) -> Preset:
         if not isinstance(self.source, Preset):
             verb = {"save": "Save", "record": "Record", "watch": "Watching a contact",
-                    "controls": "Changing a setting"}.get(what, what)
+                    "controls": "Changing a setting", "fit": "Fitting the strain"}.get(what, what)
             raise GranLabError(f"{verb} works on a running preset, not on a replay ({self.source.path.name} is "
                                f"already a file): choose a preset first (a movie of a replay: granlab render "
                                f"{self.source.path.name} --out movie.gif)")
@@ -446,13 +314,18 @@ class LabEngine:
             self._info(f"applied: {labels} (restarted at t = 0)", key)
             return
         notes = preset.apply(**changes)
-        if "speed" in changes:
-            self._reanchor()
+        self._reanchor()  # a new speed or period changes the pace
+        waiting = [k for k in changes if k in preset.pending]
+        if waiting:
+            self._info(f"from {preset.status().get('pending_from', 'later')}: {labels} (until then the values in "
+                       f"effect stay)", key)
+            return
         self._info(f"applied: {labels}" + (f" ({'; '.join(notes)})" if notes else ""), key)
 
     def _switch(self, source) -> None:
         """Show ``source`` (a preset from its start, or a replay at its first frame)."""
         self.source = source
+        self._stepping = None
         self._history.clear()
         self._history_bytes = 0
         self._rate.clear()
@@ -521,7 +394,7 @@ class LabEngine:
         source = self.source
         start = time.perf_counter()
         try:
-            done = source.advance(steps)
+            done = source.advance(steps, deadline=start + CHUNK_SECONDS)
         except DivergenceError as error:
             self.running = False
             self._error(f"{error} Paused: change a parameter or restart the preset, then press play.")
@@ -535,12 +408,28 @@ class LabEngine:
             self._rate.popleft()
 
     def _step_once(self) -> None:
-        """One sample interval of the preset (a path sample), or the next frame of a replay."""
+        """One sample interval of the preset (a path sample), or the next frame of a replay. The
+        preset's interval is run in chunks like a play (:meth:`_step_chunk`): commands are
+        answered on the way, and Pause, Play, a new preset or a restart end the step."""
         source = self.source
         if isinstance(source, Replay):
             self._seek(min(source.index + 1, source.count - 1))
             return
-        self._advance(source.steps_to_next_sample())
+        if self._stepping is None:
+            self._stepping = source.sim.time + source.steps_to_next_sample() * source.sim.dt
+            self._step_from = source.sim.time
+
+    def _step_chunk(self) -> float:
+        """A chunk of the step under way; the step ends at its target time."""
+        sim = self.source.sim
+        remaining = math.ceil((self._stepping - sim.time) / sim.dt - 1e-6)
+        if remaining <= 0:
+            self._stepping = None
+            return 0.05
+        self._advance(min(remaining, self._chunk_steps()))
+        if self.error:
+            self._stepping = None
+        return 0.0
 
     def _collect(self) -> None:
         """Move the rows the preset recorded into the buffers."""
@@ -595,7 +484,12 @@ class LabEngine:
         seconds = sum(r[3] for r in self._rate)
         span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
         simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0
-        state = "error" if self.error else ("waiting" if self.waiting else ("running" if self.running else "paused"))
+        state = "error" if self.error else ("waiting" if self.waiting else ("running" if self.running else
+                                                                            "stepping" if self._stepping is not None
+                                                                            else "paused"))
+        if self._stepping is not None:
+            interval = self._stepping - self._step_from
+            status["step_progress"] = (self._time() - self._step_from) / interval if interval > 0 else 1.0
         status.update(state=state, error=self.error,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
@@ -603,6 +497,7 @@ class LabEngine:
                       presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history),
                       history_mib=self._history_bytes / 2 ** 20,
                       analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy,
+                      jobs=[job.describe() for job in self.jobs.running()],
                       message_seq=self.messages.latest_seq)
         status = jsonable(status)
         with self._lock:
@@ -624,6 +519,8 @@ class LabEngine:
             self._history_bytes -= self._history.popleft()[0].nbytes
 
     def _save(self, name: str) -> None:
+        """Write the kept frames, the series and a checkpoint into a run file, in a job: the
+        simulation goes on meanwhile (what is saved is the run up to now)."""
         preset = self._preset_only("save")
         path = new_file(self.data_dir, name)
         sim = preset.views()[0].sim
@@ -633,52 +530,26 @@ class LabEngine:
         names = (sim.particles.count, sim.walls.names)
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
                     "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time(),
-                    "watched": [list(pair) for pair in preset.watched()],
+                    "watched": [list(pair) for pair in preset.watched()], "changes": preset.changes,
                     "watched_labels": [pair_label(pair, *names) for pair in preset.watched()]}
-        partial = partial_file(path)
-        try:
-            with h5md.RunWriter(partial, sim, protocol=jsonable(protocol), lab_series=dict(preset.series),
-                                overwrite=True) as writer:
-                for snap, settings in frames:
-                    writer.write_frame(snap, settings)
-                for name_, buffer in self.buffers.items():
-                    if name_ in preset.series:
-                        writer.write_series(name_, buffer.array())
-                if "cycles" in preset.series:
-                    self._write_cycles(writer, self.buffers["cycles"], sim)
-                writer.write_checkpoint(sim)
-            partial.replace(path)  # a file appears in the list only once complete
-        finally:
-            partial.unlink(missing_ok=True)
-        self._info(f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) "
-                   f"to {path.name}", "save")
-
-    @staticmethod
-    def _write_cycles(writer: h5md.RunWriter, buffer: SeriesBuffer, sim) -> None:
-        """The cycle records of ``granlab info`` from the lab's cycle series (wall positions
-        rebuilt from the box lengths: the left and bottom walls do not move)."""
-        columns = buffer.columns
-        names = sim.walls.names
-        for row in buffer.array():
-            record = dict(zip(columns, row))
-            walls = np.array(sim.walls.offset, dtype=float)
-            if "right" in names and "top" in names:
-                walls[names.index("right")] = -record["length_x"] - walls[names.index("left")]
-                walls[names.index("top")] = -record["length_y"] - walls[names.index("bottom")]
-            writer.write_cycle_record(int(record["cycle"]), int(record["step"]), record["t"], record["length_x"],
-                                      record["length_y"], walls)
+        rows = {name_: buffer.array() for name_, buffer in self.buffers.items() if name_ in preset.series}
+        cycles = _cycle_records(self.buffers["cycles"], sim) if "cycles" in preset.series else []
+        self.jobs.start("save", f"saving {path.name}", write_run,
+                        (path, copy.deepcopy(sim), frames, jsonable(protocol), dict(preset.series), rows, cycles))
+        self._info(f"saving {len(frames)} frames to {path.name}…", "save")
 
     def _load(self, name: str) -> None:
+        """Read a file of the data folder in a job; it replaces the preset once read."""
         path = safe_path(self.data_dir, name)
-        self._switch(Replay(path))
-        self.running = True
-        self._info(f"replaying {path.name}: {self.source.count} frames, {self.source.time_label} = "
-                   f"{self.source.times[0]:.4g} to {self.source.times[-1]:.4g}", "load")
+        if not path.is_file():
+            raise ParameterError("file name", name, "a file of the lab's data folder (" +
+                                 (", ".join(self.saved_files()) or "none yet: save a run first") + ")")
+        self.jobs.start("load", f"reading {path.name}", read_replay, (path,), time_limit=read_time_limit(path))
+        self._info(f"reading {path.name}…", "load")
 
     def _record(self, name: str, seconds: float, color: str = "rotation") -> None:
         """Render the kept frames of the last ``seconds`` of simulated time into a movie in the
-        data folder, disks coloured by ``color``, on a thread of its own (rendering takes a
-        while; the run goes on)."""
+        data folder, disks coloured by ``color``, in a job (the run goes on)."""
         preset = self._preset_only("record")
         if color not in COLOR_FIELDS:
             raise ParameterError("record colouring", color, "one of " + ", ".join(COLOR_FIELDS))
@@ -694,24 +565,25 @@ class LabEngine:
             raise ParameterError("record seconds", seconds,
                                  f"a span holding at least 2 kept frames (frames are kept every "
                                  f"{preset.cycle_time() / preset.settings.frames_per_cycle:.3g} of simulated time)")
-        self._recorder.submit(self._write_movie, path, frames, color)
-        self._info(f"recording {len(frames)} frames to {path.name}...", "record")
+        self.jobs.start("record", f"recording {path.name}", write_lab_movie, (path, frames, color))
+        self._info(f"recording {len(frames)} frames to {path.name}…", "record")
 
-    def _write_movie(self, path: Path, frames: list, color: str) -> None:
-        from .render import write_movie  # matplotlib takes a second to load: only when a movie is made
-
-        partial = None
-        try:
-            partial = partial_file(path)
-            count = write_movie(((build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames), partial,
-                                color_field=color)
-            partial.replace(path)
-            self._info(f"recorded {count} frames to {path.name}", "record")
-        except (GranLabError, ValueError, OSError) as error:
-            self.messages.add("error", f"recording {path.name} failed: {error}", "record")
-        finally:
-            if partial is not None:
-                partial.unlink(missing_ok=True)
+    def _job_done(self, outcome: JobOutcome) -> None:
+        """A job ended: a replay read is shown; the others say what they wrote."""
+        job = outcome.job
+        if outcome.cancelled:
+            self._info(f"{job.label}: cancelled (nothing written)" if job.kind != "load" else
+                       f"{job.label}: cancelled", job.kind)
+        elif outcome.error:
+            self.messages.add("error", outcome.error, job.kind)
+        elif job.kind == "load":
+            replay = outcome.result
+            self._switch(replay)
+            self.running = True
+            self._info(f"replaying {replay.path.name}: {replay.count} frames, {replay.time_label} = "
+                       f"{replay.times[0]:.4g} to {replay.times[-1]:.4g}", "load")
+        else:
+            self._info(outcome.result, job.kind)
 
     def _analyze(self, kind: str) -> None:
         """Hand the current state to the analysis thread: a snapshot of the running preset (its
@@ -721,9 +593,9 @@ class LabEngine:
         if isinstance(self.source, Preset):
             state = PackingState.from_snapshot(self.source.views()[0].sim.snapshot(), source=self.source.title)
         else:
-            state = read_state(self.source.path, self.source.index, contacts=self.source.contacts)
+            state = self.source.state  # a run file's frame is read on the analysis thread
         self.analysis.request(state, kind)
-        self._info(f"analysis: {kind} of the state at t = {state.time:.4g} started", "analysis")
+        self._info(f"analysis: {kind} of the state at t = {self._time():.4g} started", "analysis")
 
     def _analysis_done(self, result: AnalysisResult) -> None:
         if result.error:
@@ -738,6 +610,24 @@ class LabEngine:
         """The run itself failed: the state shows the error until play, a reset or a new preset."""
         self.error = text
         self.messages.add("error", text, "run")
+
+
+def _cycle_records(buffer: SeriesBuffer, sim) -> list[tuple]:
+    """The cycle records of ``granlab info`` from the lab's cycle series, as
+    :meth:`engine.io.h5md.RunWriter.write_cycle_record` takes them (wall positions rebuilt from
+    the box lengths: the left and bottom walls do not move)."""
+    columns = buffer.columns
+    names = sim.walls.names
+    records = []
+    for row in buffer.array():
+        record = dict(zip(columns, row))
+        walls = np.array(sim.walls.offset, dtype=float)
+        if "right" in names and "top" in names:
+            walls[names.index("right")] = -record["length_x"] - walls[names.index("left")]
+            walls[names.index("top")] = -record["length_y"] - walls[names.index("bottom")]
+        records.append((int(record["cycle"]), int(record["step"]), record["t"], record["length_x"],
+                        record["length_y"], walls))
+    return records
 
 
 def _shown(value) -> str:

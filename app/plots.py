@@ -17,7 +17,8 @@ import math
 
 import numpy as np
 import panel as pn
-from bokeh.models import ColorBar, ColumnDataSource, CustomJSTickFormatter, LinearColorMapper, Range1d, Span
+from bokeh.models import (ColorBar, ColumnDataSource, CustomJSTickFormatter, LabelSet, LinearColorMapper, Range1d,
+                          Span)
 from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
@@ -31,6 +32,8 @@ TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 LINE_ROLLOVER = 40000
 PATH_ROLLOVER = 12000
 """Rows a tab keeps of a time series, and segments of a path (a few load cycles of watched contacts)."""
+CHANGE_COLOR = "#7b1fa2"
+"""The colour of the change markers: none of the lines' or paths' colours."""
 CYCLES_SHOWN = 6
 """The q–γ plot colours the last cycles from light to dark; older ones are light grey."""
 
@@ -85,6 +88,32 @@ def legend_above(fig, columns: int | None = None) -> None:
     legend.margin = 2
     if columns is not None:
         legend.ncols = columns
+
+
+class ChangeMarks:
+    """A labelled vertical line at each change of the physics on a plot whose x is time (or the
+    load cycle): what changed, from → to, written along the line."""
+
+    def __init__(self, fig, name: str, x: str):
+        self.x = x
+        self.source = ColumnDataSource({"x": [], "text": []}, name=f"{name}-changes")
+        fig.vspan(x="x", source=self.source, line_color=CHANGE_COLOR, line_dash="dashed", line_width=1.5)
+        fig.add_layout(LabelSet(x="x", y=4, y_units="screen", text="text", source=self.source, angle=math.pi / 2,
+                                x_offset=-3, text_font_size="11px", text_color=CHANGE_COLOR, text_align="left",
+                                text_baseline="bottom"))
+        self._shown = None
+
+    def show(self, changes: list[dict]) -> None:
+        marks = [c for c in changes if c.get(self.x) is not None]
+        key = tuple((c[self.x], c["text"]) for c in marks)
+        if key == self._shown:
+            return
+        self._shown = key
+        # changes at one moment share one line and one label
+        moments: dict[float, list[str]] = {}
+        for change in marks:
+            moments.setdefault(change[self.x], []).append(change["text"])
+        self.source.data = {"x": list(moments), "text": ["; ".join(texts) for texts in moments.values()]}
 
 
 def _empty(columns) -> dict:
@@ -144,6 +173,13 @@ class LinePlot(LivePlot):
                              **options)
         if len(lines) > 1:
             legend_above(self.figure)
+        self.marks = ChangeMarks(self.figure, name, "t") if lines[0][0] == "t" else None
+
+    def clear(self):
+        super().clear()
+        if self.marks is not None:
+            self.marks.source.data = {"x": [], "text": []}
+            self.marks._shown = None
 
     def feed(self, series, columns, reset, status):
         _stream(self.source, columns, reset, LINE_ROLLOVER)
@@ -151,6 +187,8 @@ class LinePlot(LivePlot):
     def refresh(self, status):
         """Plots against time follow the last ``window`` of simulated time (a few load cycles, so
         the cycles can be told apart on a projector), or show the whole run."""
+        if self.marks is not None:
+            self.marks.show(status.get("changes") or [])
         window = float(status.get("window") or 0.0)
         x_range = self.figure.x_range
         if self.lines[0][0] != "t" or (x_range.follow_interval or 0.0) == window:
@@ -191,7 +229,9 @@ class Segments:
 
 class StrainPlot(LivePlot):
     """Ratcheting Fig. 2: γ at the start of each cycle, from the reference cycle on (the first
-    cycles settle the packing), with the fitted strain per cycle. The y-range fits these points."""
+    cycles settle the packing), with the strain per cycle fitted from the cycle the preset fits
+    from (``fit_from`` of the status: after the last change of the physics, whose marker is drawn);
+    the cycles before it are grey. The y-range fits these points."""
 
     reads = ("cycles",)
 
@@ -203,11 +243,15 @@ class StrainPlot(LivePlot):
         fig.x_range = Range1d(0, 1)
         fig.y_range = Range1d(-1, 1)
         self.points = ColumnDataSource({"cycle": [], "strain": []}, name="strain-cycles")
+        self.before = ColumnDataSource({"cycle": [], "strain": []}, name="strain-before-fit")
         self.fit = ColumnDataSource({"cycle": [], "strain": []}, name="strain-fit")
-        self.sources = [self.points, self.fit]
+        self.sources = [self.points, self.before, self.fit]
+        fig.scatter("cycle", "strain", source=self.before, size=7, color="#b0b0b0",
+                    legend_label="before the fit (settling)")
         fig.scatter("cycle", "strain", source=self.points, size=7, legend_label="γ − γ_ref at the start of a cycle")
         fig.line("cycle", "strain", source=self.fit, color="#d62728", line_width=2, legend_label="fitted line")
-        legend_above(fig)
+        legend_above(fig, columns=2)
+        self.marks = ChangeMarks(fig, name, "cycle")
         self.cycles: dict[int, float] = {}
         self._shown = None
 
@@ -215,6 +259,8 @@ class StrainPlot(LivePlot):
         super().clear()
         self.cycles = {}
         self._shown = None
+        self.marks.source.data = {"x": [], "text": []}
+        self.marks._shown = None
 
     def feed(self, series, columns, reset, status):
         if reset:
@@ -222,34 +268,41 @@ class StrainPlot(LivePlot):
         self.cycles.update(zip(map(int, columns.get("cycle", [])), columns.get("gamma", [])))
 
     def refresh(self, status):
+        self.marks.show(status.get("changes") or [])
         fit = status.get("strain")
-        reference = fit["reference_cycle"] if fit else self.reference
-        key = (len(self.cycles), None if fit is None else fit["dgamma"])
+        fit_from = status.get("fit_from") or {"cycle": self.reference, "after": ""}
+        start = fit_from["cycle"]
+        after = f" ({fit_from['after']})" if fit_from.get("after") else ""
+        key = (len(self.cycles), start, None if fit is None else fit["dgamma"])
         if key == self._shown:
             return
         self._shown = key
-        if reference not in self.cycles:
-            self.points.data = {"cycle": [], "strain": []}
-            self.fit.data = {"cycle": [], "strain": []}
-            self.figure.title.text = f"Strain at the start of each cycle, from cycle {reference} on (not reached yet)"
-            return
-        cycles = np.array(sorted(c for c in self.cycles if c >= reference), dtype=float)
-        strain = np.array([self.cycles[int(c)] for c in cycles]) - self.cycles[reference]
-        self.points.data = {"cycle": cycles, "strain": strain}
         fig = self.figure
-        fig.x_range.start, fig.x_range.end = reference - 0.5, max(cycles[-1], reference + 3) + 0.5
+        first = min(self.reference, start)
+        if first not in self.cycles:
+            for source in self.sources:
+                source.data = {"cycle": [], "strain": []}
+            fig.title.text = f"Strain at the start of each cycle, from cycle {first} on (not reached yet)"
+            return
+        reference = start if start in self.cycles else first
+        cycles = np.array(sorted(c for c in self.cycles if c >= first), dtype=float)
+        strain = np.array([self.cycles[int(c)] for c in cycles]) - self.cycles[reference]
+        fitted = cycles >= start
+        self.points.data = {"cycle": cycles[fitted], "strain": strain[fitted]}
+        self.before.data = {"cycle": cycles[~fitted], "strain": strain[~fitted]}
+        fig.x_range.start, fig.x_range.end = first - 0.5, max(cycles[-1], start + 3) + 0.5
         low, high = float(strain.min()), float(strain.max())
         if fit is None:
             self.fit.data = {"cycle": [], "strain": []}
-            fig.title.text = f"Strain at the start of each cycle, from cycle {reference} (the fit needs 3 cycles)"
+            fig.title.text = f"Strain per cycle, fit from cycle {start}{after}:\nthe fit needs 3 cycles"
         else:
-            ends = np.array([cycles[0], cycles[-1]])
+            ends = np.array([start, cycles[-1]], dtype=float)
             line = fit["mean_gamma"] - fit["gamma_ref"] + fit["dgamma"] * (ends - fit["mean_cycle"])
             self.fit.data = {"cycle": ends, "strain": line}
             low, high = min(low, float(line.min())), max(high, float(line.max()))
             verdict = "ratcheting: the points lie on the line" if fit["ratcheting"] else \
                 "no clear ratcheting: scatter exceeds drift"
-            fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fitted from cycle {reference}\n"
+            fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fit from cycle {start}{after}\n"
                               f"{verdict} (RMS {compact(fit['rms'])})")
         pad = 0.08 * (high - low) if high > low else max(abs(high), 1e-12)
         fig.y_range.start, fig.y_range.end = low - pad, high + pad

@@ -12,6 +12,7 @@ import shutil
 import time
 import urllib.error
 import urllib.request
+from pathlib import Path
 from urllib.parse import parse_qs, urlparse
 
 import pytest
@@ -239,6 +240,115 @@ def test_a_refused_value_goes_back_to_the_value_in_effect_with_a_message_beside_
     assert s["settings"]["amplitude"] == before and s["state"] == "running"
     step = s["step"]
     wait_status(lab, lambda s: s["step"] > step)
+
+
+def type_into(page, css: str, text: str) -> None:
+    box = page.locator(f"{css} input")
+    box.fill(text)
+    page.keyboard.press("Enter")
+
+
+def answers_within(lab, predicate, seconds: float) -> float:
+    """How long until ``/status`` matches ``predicate`` (it must within ``seconds``)."""
+    start = time.perf_counter()
+    wait_status(lab, predicate, timeout=seconds)
+    return time.perf_counter() - start
+
+
+def test_a_typo_in_the_period_never_freezes_the_lab(page, lab):
+    """Period T = 10000000 typed, then 10 back, Step, Pause: the typo is refused with both bounds,
+    the period acts at once, and the lab answers every command within half a second."""
+    open_dashboard(page, lab, "ratchet16")
+    choose_preset(page, lab, "ratchet16")  # from t = 0 with the preset's own settings
+    wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
+    type_into(page, ".period-input", "10000000")
+    expect(page.locator(".note-period")).to_contain_text("Period T = 10000000 is not allowed: a period from 100 time "
+                                                        "steps", timeout=10000)
+    expect(page.locator(".note-period")).to_contain_text("<= T <= 7702")
+    expect(page.locator(".period-input input")).to_have_value("10", timeout=10000)
+    type_into(page, ".period-input", "20")
+    s = wait_status(lab, lambda s: s["settings"]["period"] == 20.0, timeout=5)
+    assert s["cycle_time"] == 20.0 and not s["pending"]  # at once, at the same fraction of the cycle
+    type_into(page, ".period-input", "10")
+    wait_status(lab, lambda s: s["cycle_time"] == 10.0, timeout=5)
+    page.click(".step-button button")
+    assert answers_within(lab, lambda s: s["state"] in ("stepping", "paused"), 0.5 + 0.4) < 0.9
+    page.click(".play-button button")  # Pause while stepping, Play once paused
+    wait_status(lab, lambda s: s["state"] in ("running", "paused"), timeout=1)
+    if status(lab)["state"] == "paused":
+        page.click(".play-button button")
+    step = wait_status(lab, lambda s: s["state"] == "running", timeout=2)["step"]
+    page.click(".play-button button")
+    assert answers_within(lab, lambda s: s["state"] == "paused", 1.0) < 0.5 + 0.4  # /status is read every 0.2 s
+    paused = status(lab)["step"]
+    time.sleep(0.5)
+    assert status(lab)["step"] == paused >= step
+    page.click(".play-button button")
+    wait_status(lab, lambda s: s["state"] == "running", timeout=2)
+
+
+def test_a_hostile_file_and_a_save_never_stop_the_simulation(page, lab):
+    """An extended XYZ file whose last count line says 10^12 atoms is refused by name, beside the
+    Load button, while the run goes on; a save is written while the simulation keeps stepping,
+    its progress shown beside the Save button."""
+    open_dashboard(page, lab, "ratchet16")
+    packing = (Path(__file__).parent / "data" / "lammps" / "packing.xyz").read_text()
+    (lab["data"] / "bad.xyz").write_text(packing + "1000000000000\ncomment\n1 2 3\n")
+    expect(page.locator(".load-select option", has_text="bad.xyz")).to_have_count(1, timeout=30000)
+    page.select_option(".load-select select", value="bad.xyz")
+    step = status(lab)["step"]
+    page.click(".load-button button")
+    expect(page.locator(".note-load")).to_contain_text("bad.xyz, frame 1: the count line says 1000000000000 particles",
+                                                       timeout=60000)
+    s = status(lab)
+    assert s["preset"] == "ratchet16" and s["state"] == "running" and s["step"] > step
+    wait_status(lab, lambda s: s["time"] > 5.0, timeout=120)
+    type_into(page, ".save-name", "busy.h5")
+    page.click(".save-button button")
+    expect(page.locator(".job-save")).to_contain_text("saving busy.h5…", timeout=10000)
+    expect(page.locator(".readout")).to_contain_text("saving busy.h5…")
+    step = status(lab)["step"]
+    wait_status(lab, lambda s: s["jobs"] and s["step"] > step + 500, timeout=30)  # stepping while it saves
+    expect(page.locator(".note-save")).to_contain_text("saved", timeout=60000)
+    expect(page.locator(".job-save")).to_be_hidden()
+    assert (lab["data"] / "busy.h5").exists()
+
+
+def test_a_loading_change_shows_the_value_in_effect_until_the_next_cycle(page, lab):
+    """Δσ typed while cycling waits for the next cycle: the box keeps the value in effect, the line
+    beside it says what comes and when; a change of μ is marked on the strain plot and the fit
+    starts after it."""
+    open_dashboard(page, lab, "ratchet16")
+    choose_preset(page, lab, "ratchet16")
+    wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
+    type_into(page, ".amplitude-input", "0.25")
+    s = wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.25}, timeout=5)
+    assert s["settings"]["amplitude"] == 0.2
+    expect(page.locator(".note-amplitude")).to_contain_text("from the next cycle: Amplitude Δσ = 0.25 (in ",
+                                                            timeout=5000)
+    expect(page.locator(".amplitude-input input")).to_have_value("0.2", timeout=5000)
+    cycle = s["cycle"]
+    s = wait_status(lab, lambda s: s["cycle"] > cycle, timeout=60)
+    assert s["settings"]["amplitude"] == 0.25 and not s["pending"]
+    expect(page.locator(".amplitude-input input")).to_have_value("0.25", timeout=5000)
+    expect(page.locator(".note-amplitude")).to_be_hidden(timeout=5000)
+    page.click(".play-button button")  # paused, a waiting change waits for the run to go on
+    wait_status(lab, lambda s: s["state"] == "paused", timeout=5)
+    type_into(page, ".amplitude-input", "0.2")
+    wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.2}, timeout=5)
+    expect(page.locator(".note-amplitude")).to_contain_text("(when the run goes on)", timeout=5000)
+    page.click(".cancel-pending-button button")
+    wait_status(lab, lambda s: not s["pending"] and s["settings"]["amplitude"] == 0.25, timeout=5)
+    expect(page.locator(".note-pending")).to_contain_text("cancelled: Δσ = 0.2 (the values in effect stay)")
+    page.click(".play-button button")
+    wait_status(lab, lambda s: s["state"] == "running", timeout=5)
+    page.check(".friction-infinite input")
+    s = wait_status(lab, lambda s: s["settings"]["friction"] == "inf", timeout=5)
+    fit = s["fit_from"]
+    assert fit["cycle"] == s["cycle"] + 3 and fit["after"] == "after μ 0.2 → ∞"  # two whole cycles after it
+    wait_model(page, "strain-per-cycle-changes", "m.data.text.includes('μ 0.2 → ∞')")
+    wait_model(page, "strain-per-cycle-changes", "m.data.text.some(t => t.startsWith('Δσ 0.2 → 0.25'))")
+    expect(page.locator(".note-friction")).to_contain_text("applied", timeout=5000)
 
 
 def test_preset_switch_builds_its_plots_and_its_text(page, lab):

@@ -3,6 +3,7 @@
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ import pytest
 from app.buffers import Cursor, SeriesBuffer
 from app.engine_thread import LabEngine, safe_path
 from engine import ParameterError
+from engine.params import Load
 from engine.io import h5md
 
 
@@ -135,10 +137,72 @@ def test_pause_step_and_play(engine):
     assert len(engine.buffers["time"]) > rows
 
 
+def test_a_long_step_runs_in_chunks_and_pause_ends_it_at_once(engine):
+    """A step to the next sample time may be millions of steps (a preset sampled once per 100
+    load cycles here): it runs in chunks between which commands are answered."""
+    engine.submit("pause")
+    wait(lambda: engine.status()["state"] == "paused")
+    preset = engine.source  # sampled once per 100 load cycles: a step of 1.3 million steps
+    preset.samples_per_cycle = preset.path_samples_per_cycle = 0.01
+    preset.settings = preset.settings.replace(frames_per_cycle=0.01)
+    preset._restart_clock()
+    step = engine.status()["step"]
+    engine.submit("step")
+    wait(lambda: engine.status()["state"] == "stepping" and engine.status()["step"] > step)
+    assert 0.0 < engine.status()["step_progress"] < 1.0
+    submitted = time.perf_counter()
+    engine.submit("pause")
+    wait(lambda: engine.status()["state"] == "paused", timeout=5.0)
+    assert time.perf_counter() - submitted < 0.5 and engine.status()["command_ms"] < 200.0
+    step = engine.status()["step"]
+    time.sleep(0.3)
+    assert engine.status()["step"] == step
+
+
+def test_a_file_that_would_hold_its_reader_is_refused_while_the_run_goes_on(engine, tmp_path):
+    """An extended XYZ file whose last count line says 10^12 atoms: the reading, in a process of
+    its own, names the frame and the count; the simulation never stops."""
+    packing = (Path(__file__).parent / "data" / "lammps" / "packing.xyz").read_text()
+    (tmp_path / "bad.xyz").write_text(packing + "1000000000000\ncomment\n1 2 3\n")
+    step = engine.status()["step"]
+    seq = engine.messages.latest_seq
+    engine.submit("load", name="bad.xyz")
+    wait(lambda: engine.status()["jobs"])
+    wait(lambda: any(m.level == "error" for m in engine.messages.since(seq)))
+    error = [m for m in engine.messages.since(seq) if m.level == "error"][-1]
+    assert error.control == "load"
+    assert "bad.xyz, frame 1: the count line says 1000000000000 particles, but only 14 bytes follow it" in error.text
+    status = engine.status()
+    assert status["preset"] == "ratchet16" and status["state"] == "running" and status["step"] > step
+    assert not status["jobs"]
+
+
+def test_the_simulation_keeps_stepping_while_a_save_is_written(engine, tmp_path):
+    wait(lambda: engine.status()["time"] > 5.0)
+    engine.submit("save", name="during")
+    job = wait(lambda: engine.status()["jobs"])[0]
+    assert job["kind"] == "save" and job["label"] == "saving during.h5"
+    step = engine.status()["step"]
+    wait(lambda: engine.status()["step"] > step + 1000 and engine.status()["jobs"])  # stepping, still saving
+    (tmp_path / ".other.x1y2.part.h5").write_bytes(b"")  # a save's file before it is complete
+    assert ".other.x1y2.part.h5" not in engine.saved_files()  # is not offered for replay
+    wait(lambda: (tmp_path / "during.h5").exists(), timeout=60.0)
+    with h5md.open_run(tmp_path / "during.h5") as f:
+        assert h5md.frame_count(f) >= 2
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == [".other.x1y2.part.h5"]  # none left
+
+
 def test_a_diverging_run_pauses_with_an_error_and_keeps_its_last_good_state(engine):
     wait(lambda: engine.status().get("cycle", 0) >= 1)
-    # a pressure 10^5 times the stiffness scale crushes the disks into each other at the next cycle
-    engine.submit("apply", changes={"pressure": 1e5})
+    seq = engine.messages.latest_seq
+    engine.submit("apply", changes={"pressure": 1e5})  # the lab's bounds refuse what would crush the disks
+    wait(lambda: last_message(engine, seq))
+    assert "a pressure from 0.01 to 5 (K_N / P0 from 10⁴ to 20" in last_message(engine, seq)[-1][1]
+    engine.submit("pause")
+    wait(lambda: engine.status()["state"] == "paused")
+    # a wall load 10^5 times the stiffness scale (as a notebook may set) crushes the disks into each other
+    engine.source.sim.set_wall_load("top", Load(base=1e5))
+    engine.submit("play")
     wait(lambda: engine.status()["state"] == "error")
     status = engine.status()
     assert "overlap" in status["error"] and "Paused" in status["error"] and not engine.running
@@ -329,6 +393,12 @@ def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folde
 
     wait(lambda: engine.status()["time"] > 12.0)
     engine.submit("record", name="last-cycle.gif", seconds=10.0)  # 10 frames per cycle of T = 10
+    seq = engine.messages.latest_seq
+    engine.submit("record", name="by-pressure.gif", seconds=10.0, color="pressure")
+    wait(lambda: last_message(engine, seq))
+    assert "recording last-cycle.gif is still going" in last_message(engine, seq)[-1][1]  # one movie at a time
+    wait(lambda: (tmp_path / "last-cycle.gif").exists(), timeout=120.0)
+    wait(lambda: not engine.status()["jobs"])
     engine.submit("record", name="by-pressure.gif", seconds=10.0, color="pressure")
     wait(lambda: (tmp_path / "by-pressure.gif").exists(), timeout=120.0)
     frames = iio.imread(tmp_path / "last-cycle.gif", index=None)

@@ -48,6 +48,7 @@ def read_xyz_frames(path: str | Path) -> list[XYZFrame]:
     path = Path(path)
     if not path.is_file():
         raise RunFileError(f"extended XYZ file {str(path)!r} does not exist")
+    check_counts(path)
     try:
         frames = ase.io.read(path, index=":", format="extxyz")
     except Exception as error:  # ASE raises many kinds (XYZError, ValueError, IndexError, KeyError)
@@ -55,6 +56,36 @@ def read_xyz_frames(path: str | Path) -> list[XYZFrame]:
     if not frames:
         raise RunFileError(f"{path} holds no frame")
     return [_frame(path, index, atoms, len(frames)) for index, atoms in enumerate(frames)]
+
+
+def check_counts(path: Path) -> None:
+    """Check each frame's count line against what is left of the file before any parser reads it:
+    a count of 10¹² particles in a file of kilobytes would have a parser read past its end for
+    minutes. Each particle's line takes at least two bytes (a value and its line end)."""
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        index = 0
+        while True:
+            line = f.readline()
+            if not line.strip():
+                if not line or not f.read(1 << 16).strip():  # the end, or only blank lines to it
+                    return
+                raise RunFileError(f"{path}, frame {index}: a blank line where a count line (the number of "
+                                   f"particles) should be")
+            try:
+                count = int(line)
+            except ValueError:
+                raise RunFileError(f"{path}, frame {index}: the count line reads {line[:40].decode(errors='replace')!r}"
+                                   f"; it should be the number of particles") from None
+            left = size - f.tell()
+            if count < 0 or 2 * count > left:
+                raise RunFileError(f"{path}, frame {index}: the count line says {count} particles, but only "
+                                   f"{left} bytes follow it (each particle needs a line of its own)")
+            for _ in range(count + 1):  # the comment line, then the particles
+                if not f.readline():
+                    raise RunFileError(f"{path}, frame {index}: the file ends inside the frame (its count line "
+                                       f"says {count} particles)")
+            index += 1
 
 
 def _frame(path: Path, index: int, atoms, count: int) -> XYZFrame:

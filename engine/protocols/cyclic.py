@@ -53,12 +53,13 @@ class CycleSeries:
         return (np.array(self.cycle), np.array(self.length_x), np.array(self.length_y))
 
 
-def apply_load(sim: Simulation, load: CyclicLoad) -> float:
-    """Load the box's right and top walls; returns the start time of the loading (now)."""
+def apply_load(sim: Simulation, load: CyclicLoad, start: float | None = None) -> float:
+    """Load the box's right and top walls, the loading started at ``start`` (default: now);
+    returns that start time."""
     for name in ("right", "top"):
         if name not in sim.walls.names:
             raise ParameterError("walls", sim.walls.names, "a biaxial box with walls named right and top")
-    start = sim.time
+    start = sim.time if start is None else start
     omega = 2.0 * math.pi / load.period
     origin = -omega * start
     sim.set_wall_load("top", Load(base=load.pressure, amplitude=load.amplitude, period=load.period, phase=origin))

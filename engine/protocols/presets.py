@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Callable
@@ -35,6 +36,24 @@ from .measures import (PairMaximum, contact_rows, coordination, mobilisation, pa
                        solid_fraction)
 from .prepare import biaxial_box, clusters, gilabert_gas, gilabert_law
 from .settings import LAW_CONTROLS, LabSettings
+
+MAX_CYCLE_STEPS = 1e7
+MAX_CYCLE_DISK_STEPS = 2e9
+"""The longest period the lab takes: at most these steps, and these steps times disks (about three
+minutes of one core: the lab runs some 12 million disk-steps per second, small samples some
+60 000 steps per second)."""
+MIN_COHESION_KAPPA = 100.0
+"""Gilabert's κ = a K_N / F0 is 10³ to 10⁵; the lab goes down to this."""
+MAX_SLOWDOWN = 10.0
+"""A law change may shorten the preset's time step this much at most."""
+CONTROL_SYMBOLS = {"pressure": "P0", "amplitude": "Δσ", "period": "T", "phase": "φ", "friction": "μ",
+                   "rolling_friction": "μr", "rolling_stiffness": "Kr", "cohesion_force": "F0", "cohesion_range": "D0",
+                   "tangential_model": "spring", "damping_ratio": "ζ"}
+"""The settings of the physics, as the plots' change markers name them (speed and the frames kept
+change nothing the plots show)."""
+MAX_CHANGES = 200
+"""Changes remembered (the oldest go first)."""
+
 
 @dataclass(frozen=True)
 class View:
@@ -82,6 +101,10 @@ class Preset(ABC):
         if "particles" in self.controls and not low <= settings.particles <= high:
             raise ParameterError("particles", settings.particles, f"{low} to {high} disks for the {self.name} preset")
         self.settings = settings
+        #: changes typed that wait for the start of the next clock unit: key -> value
+        self.pending: dict = {}
+        #: the changes of the physics so far: {"t", "cycle", "key", "text"}
+        self.changes: list[dict] = []
         self.stage = ""
         self._rows = {name: [] for name in self.series}
         self.watch: list[tuple[int, int]] = []
@@ -90,6 +113,7 @@ class Preset(ABC):
         #: called (on the engine thread) at each frame time; the engine keeps the frame
         self.on_frame: Callable[[], None] | None = None
         self._build()
+        self._own_dt = self.sim.auto_dt()
         self._restart_clock()
 
     @abstractmethod
@@ -119,13 +143,15 @@ class Preset(ABC):
     def views(self) -> list[View]:
         return [View(self._sim)]
 
-    def advance(self, steps: int) -> int:
+    def advance(self, steps: int, deadline: float | None = None) -> int:
         """Run up to ``steps`` steps of the protocol, stopping on the way at every sample time
-        (recording the series) and frame time (calling ``on_frame``); returns the steps run."""
+        (recording the series) and frame time (calling ``on_frame``); returns the steps run.
+        With ``deadline`` (a :func:`time.perf_counter` value) it returns at the first sample time
+        after it, so that a caller slicing its work by wall clock is never held long."""
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
             raise ParameterError("steps", steps, "a whole number >= 1")
         done = 0
-        while done < steps:
+        while done < steps and (deadline is None or done == 0 or time.perf_counter() < deadline):
             done += self._advance(min(int(steps) - done, self.steps_to_next_sample()))
             self._record_due()
         return done
@@ -167,31 +193,110 @@ class Preset(ABC):
     def apply(self, **changes) -> list[str]:
         """Change controls (validated first: on error nothing changes). Law controls act at once
         (or wait for the stage that uses them). Returns notes for the user (e.g. the new time step)."""
-        values = {**dataclasses.asdict(self.settings), **changes}
+        values = {**dataclasses.asdict(self.settings), **self.pending, **changes}
         for key, (holds, allowed) in self._rules(values).items():
             if key in changes and not holds:
                 raise ParameterError(key, changes[key], allowed)
-        settings = self.settings.replace(**changes)
-        law_changes = {key: getattr(settings, key) for key in self._live_law_controls() if key in changes}
+        self.settings.replace(**{**self.pending, **changes})  # the settings once every change acts
+        waiting = {key: value for key, value in changes.items() if key in self._waiting_controls()}
+        now = {key: value for key, value in changes.items() if key not in waiting}
+        settings = self.settings.replace(**now)
+        self._check_time_step({key: getattr(settings, key) for key in LAW_CONTROLS
+                               if key in changes and key in self.controls})
+        law_changes = {key: getattr(settings, key) for key in self._live_law_controls() if key in now}
         notes = self._set_law(**law_changes) if law_changes else []
-        self.settings = settings
-        self._changed(changes)
+        before, self.settings = self.settings, settings
+        self._changed(now)
+        self._log_changes(before)
+        for key, value in waiting.items():  # a value back to the one in effect cancels the change
+            if value == getattr(settings, key):
+                self.pending.pop(key, None)
+            else:
+                self.pending[key] = value
         if "rolling_friction" in changes and settings.rolling_friction > 0 and settings.rolling_stiffness == 0 \
                 and "rolling_stiffness" in self.controls:
             notes.append("Rolling friction μr acts only through the rolling spring: with Kr = 0 there is no rolling "
                          "moment. Set Kr > 0 (Gilabert: Kr = 1e-4 K_N a²).")
         return notes
 
+    def _waiting_controls(self) -> tuple[str, ...]:
+        """Controls that, now, wait for the start of the next clock unit (e.g. a load cycle):
+        :meth:`apply` keeps them in ``pending``, the preset applies them with
+        :meth:`_apply_pending`."""
+        return ()
+
+    def _apply_pending(self) -> None:
+        """Let the waiting changes act (the preset calls it where they can)."""
+        if self.pending:
+            before, self.settings, self.pending = self.settings, self.settings.replace(**self.pending), {}
+            self._log_changes(before)
+
+    def cancel_pending(self) -> str:
+        """Drop the waiting changes; says which, for the user."""
+        if not self.pending:
+            return "no change was waiting"
+        text = ", ".join(f"{CONTROL_SYMBOLS.get(key, key)} = {_value_text(value)}" for key, value in self.pending.items())
+        self.pending = {}
+        return f"cancelled: {text} (the values in effect stay)"
+
+    def _log_changes(self, before: LabSettings) -> None:
+        """Record each setting of the physics that changed since ``before``, with the time and the
+        position in the clock (the plots mark them; a fit starts after them)."""
+        for key, symbol in CONTROL_SYMBOLS.items():
+            old, new = getattr(before, key), getattr(self.settings, key)
+            if old != new:
+                self.changes.append({"t": self.sim.time, "cycle": self._clock_position(), "key": key,
+                                     "text": f"{symbol} {_value_text(old)} → {_value_text(new)}"})
+        del self.changes[:-MAX_CHANGES]
+
+    def _clock_position(self) -> float | None:
+        """Where the protocol's clock stands in its units (e.g. 41.3 load cycles), if it counts them."""
+        return None
+
     def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
         """This preset's rules on its settings given the others (beyond LabSettings' own checks):
-        key -> (whether ``values`` keep it, what is allowed and what to change)."""
-        return {}
+        key -> (whether ``values`` keep it, what is allowed and what to change). The bounds of the
+        contact law's lengths and forces follow the disks' size and stiffness."""
+        sim = self.sim
+        radius = float(sim.particles.radius.max())
+        stiffness = sim.law.normal_stiffness
+        rolling, cohesion, reach = (_real(values[key]) for key in ("rolling_friction", "cohesion_force",
+                                                                   "cohesion_range"))
+        return {"rolling_friction": (0.0 <= rolling <= radius or rolling == math.inf,
+                                     f"a rolling friction length from 0 to the largest disk's radius {radius:.3g}, or "
+                                     f"∞ (no rolling): a rolling moment is at most μr F_n"),
+                "cohesion_force": (0.0 <= cohesion <= stiffness * 2.0 * radius / MIN_COHESION_KAPPA,
+                                   f"a cohesion from 0 to {stiffness * 2.0 * radius / MIN_COHESION_KAPPA:.3g}: "
+                                   f"κ = a K_N / F0 of at least {MIN_COHESION_KAPPA:g} (a = {2.0 * radius:.3g}, "
+                                   f"K_N = {stiffness:.3g}); stronger, it presses the disks into each other"),
+                "cohesion_range": (0.0 <= reach <= 0.2 * radius,
+                                   f"a range from 0 to a tenth of the largest diameter, {0.2 * radius:.3g} (Gilabert: "
+                                   f"D0 = 10⁻³ a)")}
 
     def _period_rule(self, values: dict) -> tuple[bool, str]:
-        dt = self.sim.dt
-        return (_real(values["period"]) >= 100 * dt,
-                f"a period of at least 100 time steps: T >= {100 * dt:.3g} (the time step {dt:.3g} follows the "
-                f"stiffness of the contacts)")
+        """From 100 time steps to a cycle the lab runs in a few minutes (and at least the preset's own)."""
+        sim = self.sim
+        dt, disks = sim.dt, sum(view.sim.particles.count for view in self.views())
+        steps = min(MAX_CYCLE_STEPS, MAX_CYCLE_DISK_STEPS / disks)
+        longest = max(steps * dt, LabSettings().replace(**self.defaults).period)
+        period = _real(values["period"])
+        return (100 * dt <= period <= longest,
+                f"a period from 100 time steps to the {steps:,.0f} steps the lab runs in about three minutes: "
+                f"{100 * dt:.3g} <= T <= {longest:.4g} (the time step {dt:.3g} follows the stiffness of the "
+                f"contacts and the size of the disks)")
+
+    def _check_time_step(self, law_changes: dict) -> None:
+        """Refuse a law that would need a time step more than MAX_SLOWDOWN times shorter than the
+        preset's own (a stiffer rolling spring, a stronger cohesion): the lab would crawl. Controls
+        that wait for a later stage are checked now, when they are typed."""
+        if not law_changes:
+            return
+        dt = self.sim.auto_dt(self.sim.law.replace(**law_changes))
+        if dt < self._own_dt / MAX_SLOWDOWN:
+            key, value = next(iter(law_changes.items()))
+            raise ParameterError(key, value, f"a value whose law needs a time step at most {MAX_SLOWDOWN:g}× shorter "
+                                             f"than the preset's {self._own_dt:.3g} (it would need {dt:.3g}: the run "
+                                             f"would slow {self._own_dt / dt:.0f}×)")
 
     def _set_law(self, **changes) -> list[str]:
         """Change the law of every view. The lab's time step is never the user's: when the new law
@@ -276,7 +381,8 @@ class Preset(ABC):
 
     def status(self) -> dict:
         return {"preset": self.name, "title": self.title, "stage": self.stage,
-                "settings": dataclasses.asdict(self.settings), "clock_unit": self.clock_unit,
+                "settings": dataclasses.asdict(self.settings), "pending": dict(self.pending),
+                "changes": list(self.changes), "clock_unit": self.clock_unit,
                 "cycle_time": self.cycle_time(), "window": self.window_cycles * self.cycle_time(),
                 "readout": self.readout()}
 
@@ -285,6 +391,12 @@ class Preset(ABC):
         fraction, coordination, sliding contacts."""
         sim = self.views()[0].sim
         return {"phi": solid_fraction(sim), "z": coordination(sim), "sliding": sliding_contacts(sim)}
+
+
+def _value_text(value) -> str:
+    if isinstance(value, float):
+        return "∞" if value == math.inf else f"{value:.4g}"
+    return str(value)
 
 
 def _real(value) -> float:
@@ -297,15 +409,17 @@ def _real(value) -> float:
 class RatchetPreset(Preset):
     """A biaxial box compressed frictionless to P0, then cyclically loaded (ratcheting Eq. 1).
 
-    Stages: ``compressing`` (until Gilabert's equilibrium or 200 tau), then ``cycling``. Loading
-    controls (P0, amplitude, period, phase) take effect at the next cycle start, where q = 0;
-    each cycle lasts exactly T (the time step is fitted to it). Series: ``time`` (t, cycle, q,
+    Stages: ``compressing`` (until Gilabert's equilibrium or 200 tau), then ``cycling``. While
+    cycling, P0, the amplitude and the phase wait for the next cycle start, where q = 0 (they are
+    ``pending`` until then); a new period acts at once, at the same fraction of the cycle, so that
+    the load goes on smoothly; each cycle ends on a step (the time step is fitted to it). Series: ``time`` (t, cycle, q,
     gamma, energies, z; cycle -1 while compressing), ``cycles`` (cycle, gamma at the start of the
     cycle, t, step, box lengths), ``contacts`` (i, j, t, F_n, F_t, status of the watched pairs).
     The watched contacts are the ``watch_count`` that came closest to the Coulomb cone during
     the first cycle (the ones that slid, if any), until the user picks others. The strain per
     cycle is fitted (:func:`engine.analysis.ratchet.ratchet_verdict`) from ``reference_cycle``
-    on: the first cycles settle the packing.
+    on: the first cycles settle the packing; after a change of the physics, from the second
+    whole cycle after it (``fit_from``), or from the next cycle start on request (:meth:`fit_from_now`).
     """
 
     name = "ratchet"
@@ -343,20 +457,25 @@ class RatchetPreset(Preset):
         self._ramping = True
         self._cycle = 0
         self._next_check = 1.0
-        self._pending_load = None
         self._start = None
+        self.fit_from = self.reference_cycle
+        self.fit_after = ""
         self._cycle_end = math.inf
         self._cycle_gamma: list[tuple[int, float]] = []
         self.verdict = None
 
     def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
         pressure, amplitude = _real(values["pressure"]), _real(values["amplitude"])
-        return {"amplitude": (0.0 <= amplitude <= 2.0 * pressure,
+        stiffness = self.sim.law.normal_stiffness
+        low, high = stiffness / 1e4, stiffness / 20.0
+        return {**super()._rules(values),
+                "amplitude": (0.0 <= amplitude <= 2.0 * pressure,
                               f"an amplitude from 0 to 2 P0 = {2.0 * pressure:g} (P0 = {pressure:g}): the load must "
                               f"not swing further than the box is pressed; raise P0 first to load harder"),
-                "pressure": (pressure > 0.0 and pressure >= 0.5 * amplitude,
-                             f"a pressure > 0 and at least Δσ/2 = {0.5 * amplitude:g} (Δσ = {amplitude:g}); lower "
-                             f"Δσ first to unload further"),
+                "pressure": (low <= pressure <= high and pressure >= 0.5 * amplitude,
+                             f"a pressure from {low:.3g} to {high:.3g} (K_N / P0 from 10⁴ to 20, K_N = {stiffness:g}: "
+                             f"harder, the disks sink into each other) and at least Δσ/2 = {0.5 * amplitude:g} "
+                             f"(Δσ = {amplitude:g}); lower Δσ first to unload further"),
                 "period": self._period_rule(values)}
 
     def _load(self) -> CyclicLoad:
@@ -372,9 +491,42 @@ class RatchetPreset(Preset):
         waiting = ("friction", "rolling_friction", "rolling_stiffness") if self.stage == "compressing" else ()
         return tuple(key for key in super()._live_law_controls() if key not in waiting)
 
+    def _waiting_controls(self) -> tuple[str, ...]:
+        return ("pressure", "amplitude", "phase") if self.stage == "cycling" else ()
+
     def _changed(self, changes: dict) -> None:
-        if any(key in changes for key in ("pressure", "amplitude", "period", "phase")) and self.stage == "cycling":
-            self._pending_load = self._load()
+        """A new period acts at once: the cycle under way goes on at the same fraction of it."""
+        if "period" in changes and self.stage == "cycling":
+            sim = self._sim
+            fraction = (sim.time - self._start) / self.load.period
+            self.load = dataclasses.replace(self.load, period=self.settings.period)
+            self._start = apply_load(sim, self.load, start=sim.time - fraction * self.load.period)
+            self._cycle_end = self._start + self.load.period
+            sim.set_dt(None)
+            self._fit_dt()
+
+    def _clock_position(self) -> float | None:
+        if self.stage != "cycling":
+            return None
+        return self._cycle + (self._sim.time - self._start) / self.load.period
+
+    def _log_changes(self, before: LabSettings) -> None:
+        count = len(self.changes)
+        super()._log_changes(before)
+        if len(self.changes) > count and self.stage == "cycling":
+            change = self.changes[-1]
+            self.fit_from = math.ceil(change["cycle"] - 1e-9) + self.reference_cycle
+            self.fit_after = "after " + "; ".join(c["text"] for c in self.changes[count:][-2:])
+            self._fit_verdict()
+
+    def fit_from_now(self) -> str:
+        """Fit the strain from the next cycle start on (no settling cycles); says so, for the user."""
+        if self.stage != "cycling":
+            raise ParameterError("fit from now", self.stage, "a box that is being cycled (it is still compressing)")
+        self.fit_from = math.ceil(self._clock_position() - 1e-9)
+        self.fit_after = "from a chosen cycle"
+        self._fit_verdict()
+        return f"the strain is fitted from cycle {self.fit_from} on"
 
     def _fit_dt(self) -> None:
         """End the current cycle on a step: the rest of it in whole steps no longer than the
@@ -437,9 +589,9 @@ class RatchetPreset(Preset):
         if self._cycle == 1 and self.auto_watch:
             self.watch = self.mobilised.largest(self.watch_count)
         self._emit_cycle()
-        load = self._pending_load if self._pending_load is not None else self.load
-        self._pending_load = None
-        self._apply_load(load)
+        self._start = self._sim.time  # the next cycle starts now, with the changes that waited for it
+        self._apply_pending()
+        self._apply_load(self._load())
 
     def _emit_cycle(self) -> None:
         sim = self._sim
@@ -447,7 +599,12 @@ class RatchetPreset(Preset):
         gamma = self._gamma()
         self._emit("cycles", (self._cycle, gamma, sim.time, sim.step, lx, ly))
         self._cycle_gamma.append((self._cycle, gamma))
-        used = [(c, g) for c, g in self._cycle_gamma if c >= self.reference_cycle]
+        self._fit_verdict()
+
+    def _fit_verdict(self) -> None:
+        """The ratchet verdict of the cycles from ``fit_from`` on (None before three)."""
+        used = [(c, g) for c, g in self._cycle_gamma if c >= self.fit_from]
+        self.verdict = None
         if len(used) >= 3:
             cycles, gammas = np.array(used, dtype=float).T
             self.verdict = ratchet_verdict(cycles, gammas)
@@ -475,10 +632,14 @@ class RatchetPreset(Preset):
         out = super().status()
         out["cycle"] = self._cycle
         out["strain"] = self._strain_fit()
+        out["fit_from"] = {"cycle": self.fit_from, "after": self.fit_after}
+        if self.pending:
+            out["pending_at"] = self._cycle_end
+            out["pending_from"] = "the next cycle"
         return out
 
     def _strain_fit(self) -> dict | None:
-        return strain_fit(self._cycle_gamma, self.reference_cycle, self.verdict)
+        return strain_fit(self._cycle_gamma, self.fit_from, self.verdict)
 
 
 def strain_fit(cycle_gamma, reference_cycle: int, verdict=None) -> dict | None:
@@ -626,7 +787,7 @@ class BlockPreset(Preset):
         self.stage = "loading"
 
     def _rules(self, values: dict) -> dict[str, tuple[bool, str]]:
-        return {"period": self._period_rule(values)}
+        return {**super()._rules(values), "period": self._period_rule(values)}
 
     def _advance(self, steps: int) -> int:
         """The sideways load is set every ``load_every`` steps (a ramp in small stairs)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,14 +49,19 @@ class LabSettings:
         if isinstance(self.particles, bool) or not isinstance(self.particles, (int, np.integer)) \
                 or not 1 <= self.particles <= 20000:
             raise ParameterError("particles", self.particles, "a whole number from 1 to 20000")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ParameterError("seed", self.seed, "a whole number >= 0")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2 ** 32:
+            raise ParameterError("seed", self.seed, f"a whole number from 0 to {2 ** 32 - 1}")
         positive("pressure", self.pressure)
         nonnegative("amplitude", self.amplitude)
         positive("period", self.period)
         if not -180.0 <= finite("phase", self.phase) <= 180.0:
             raise ParameterError("phase", self.phase, "an angle from -180 to 180 degrees")
-        positive("speed", self.speed, allow_inf=True)
+        if not (MIN_SPEED <= positive("speed", self.speed, allow_inf=True) <= MAX_SPEED or self.speed == math.inf):
+            raise ParameterError("speed", self.speed, f"from {MIN_SPEED:g} to {MAX_SPEED:g} clock units (load cycles, "
+                                                      f"loops, T₀) per second, or inf (as fast as it can)")
+        if not (nonnegative("friction", self.friction, allow_inf=True) <= MAX_FRICTION or self.friction == math.inf):
+            raise ParameterError("friction", self.friction, f"a friction coefficient from 0 to {MAX_FRICTION:g}, or inf "
+                                                            f"(no sliding)")
         if not 0.0 < finite("frames_per_cycle", self.frames_per_cycle) <= 100.0:
             raise ParameterError("frames_per_cycle", self.frames_per_cycle,
                                  "from more than 0 to 100 frames kept per clock unit (a load cycle, a loop, T_0)")
@@ -71,6 +77,10 @@ class LabSettings:
                 raise ParameterError(key, value, "one of " + ", ".join(sorted(names)))
         return dataclasses.replace(self, **changes)
 
+
+MIN_SPEED, MAX_SPEED = 0.01, 100.0
+MAX_FRICTION = 10.0
+"""Beyond it no contact of the lab's packings slides: μ = ∞ says so."""
 
 LAW_CONTROLS = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "cohesion_range",
                 "tangential_model", "damping_ratio")

@@ -1,0 +1,97 @@
+"""The lab's file jobs (app.jobs): a child process per job, its progress, its outcome, and the lab
+never held by it — a child that hangs is given up after its time limit or killed on Cancel, one
+that crashes says how it ended."""
+
+import os
+import threading
+import time
+
+import pytest
+
+from app.jobs import Jobs
+from engine.errors import GranLabError
+
+
+def counting(report, count):
+    for k in range(count):
+        report((k + 1) / count)
+    return count
+
+
+def hanging(report):
+    report(0.25)
+    time.sleep(3600)
+
+
+def crashing(report):
+    os.abort()
+
+
+def refusing(report, name):
+    raise GranLabError(f"{name} is not a run file")
+
+
+class Outcomes:
+    def __init__(self):
+        self.done = threading.Event()
+        self.outcome = None
+
+    def __call__(self, outcome):
+        self.outcome = outcome
+        self.done.set()
+
+    def wait(self, timeout=60.0):
+        assert self.done.wait(timeout), "the job never ended"
+        return self.outcome
+
+
+@pytest.fixture
+def jobs():
+    outcomes = Outcomes()
+    runner = Jobs(on_done=outcomes)
+    yield runner, outcomes
+    runner.close()
+
+
+def test_a_job_returns_its_result_and_is_listed_while_it_runs(jobs):
+    runner, outcomes = jobs
+    job = runner.start("save", "saving run1.h5", counting, (5,))
+    assert [j.label for j in runner.running()] == ["saving run1.h5"]
+    with pytest.raises(GranLabError, match="saving run1.h5 is still going .* wait for it or cancel it first"):
+        runner.start("save", "saving run2.h5", counting, (5,))
+    outcome = outcomes.wait()
+    assert outcome.job is job and outcome.result == 5 and not outcome.error and job.progress == 1.0
+    assert runner.running() == []
+
+
+def test_an_error_in_the_child_comes_back_as_its_message(jobs):
+    runner, outcomes = jobs
+    runner.start("load", "reading bad.xyz", refusing, ("bad.xyz",))
+    assert outcomes.wait().error == "bad.xyz is not a run file"
+
+
+def test_a_hanging_child_is_given_up_after_its_time_limit(jobs):
+    runner, outcomes = jobs
+    start = time.monotonic()
+    job = runner.start("load", "reading bad.xyz", hanging, (), time_limit=3.0)
+    outcome = outcomes.wait()
+    assert 3.0 <= time.monotonic() - start < 10.0 and job.progress == 0.25
+    assert outcome.error == "reading bad.xyz gave up after 3 s (the file may be damaged or far larger than it looks)"
+
+
+def test_cancel_kills_the_child_at_once(jobs):
+    runner, outcomes = jobs
+    job = runner.start("record", "recording movie.gif", hanging, ())
+    while job.progress == 0.0:  # the child has started
+        time.sleep(0.05)
+    start = time.monotonic()
+    assert runner.cancel("record") is job
+    assert outcomes.wait().cancelled and time.monotonic() - start < 2.0
+    assert runner.cancel("record") is None
+
+
+def test_a_crashing_child_says_how_it_ended(jobs):
+    runner, outcomes = jobs
+    runner.start("save", "saving run1.h5", crashing, ())
+    assert outcomes.wait().error == ("saving run1.h5 failed: its process ended without an answer (killed by "
+                                     "signal 6)")
