@@ -33,7 +33,7 @@ from .drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
-PRESET_OPTIONS = {cls.title: name for name, cls in PRESETS.items()}
+PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
@@ -91,8 +91,9 @@ class Dashboard:
         self._note_shown: dict[str, float] = {}
         self._build_widgets()
         self.analysis_view = self._build_analysis()
-        self.pane_choice = pn.widgets.RadioButtonGroup(options=list(PANES), value=PANES[0],
-                                                       css_classes=["pane-choice"], sizing_mode="stretch_width")
+        self.pane_choice = pn.widgets.RadioButtonGroup(options=list(PANES), value=PANES[0], height=30,
+                                                       margin=(4, 10, 2, 10), css_classes=["pane-choice"],
+                                                       sizing_mode="stretch_width")
         self.pane_choice.param.watch(lambda e: self._show_pane(), "value")
         self.right = pn.Column(sizing_mode="stretch_both", styles={"flex": "1 1 0"})
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
@@ -277,15 +278,21 @@ class Dashboard:
                 self.cursors[series] = Cursor()
             self.shown.append(plot)
 
+    @staticmethod
+    def _plot_column(panes: list) -> pn.Column:
+        """Plots one above the other, each at least PLOT_HEIGHT high: those that do not fit scroll."""
+        return pn.Column(*panes, sizing_mode="stretch_both", scroll=True, margin=0)
+
     def _show_pane(self) -> None:
         choice = self.pane_choice.value
         plots = self.shown
         keys = [p for p in plots if p.name in self.key_names] or plots[:2]
         if choice == "Key plots":
-            self.right.objects = [self.pane_choice] + [p.pane for p in keys]
+            self.right.objects = [self.pane_choice, self._plot_column([p.pane for p in keys])]
         elif choice == "More plots":
             others = [p.pane for p in plots if p not in keys]
-            self.right.objects = [self.pane_choice] + (others or [pn.pane.Markdown("*This preset has no other plots.*")])
+            self.right.objects = [self.pane_choice, self._plot_column(others) if others else
+                                  pn.pane.Markdown("*This preset has no other plots.*")]
         elif choice == "About this preset":
             self.right.objects = [self.pane_choice, self.about]
         else:

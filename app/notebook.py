@@ -21,7 +21,7 @@ from engine.analysis.states import PackingState
 from engine.studies import RatchetCurve
 
 from .analysis import AnalysisResult
-from .plots import MODEL_COLORS, AnalysisFigures, compact, lab_figure, legend_above
+from .plots import MODEL_COLORS, AnalysisFigures, compact, lab_figure, legend_beside
 
 _shown_inline = False
 
@@ -56,7 +56,7 @@ def strain_figure(curves: list[RatchetCurve]):
         fig.scatter(cycles, curve.gamma, color=color, size=5, legend_label="γ at the start of a cycle")
         fitted = verdict.dgamma * (cycles - cycles.mean()) + curve.gamma.mean()
         fig.line(cycles, fitted, color=color, line_width=2, legend_label="line fitted (Sec. IV B 1)")
-        legend_above(fig, columns=1)
+        legend_beside(fig)
         figures.append(fig)
     return row(*figures)
 
@@ -98,7 +98,7 @@ def force_network_figure(state: PackingState, title: str = "Force network"):
     if any(state.periodic):
         lx, ly = state.box_lengths
         fig.line([0, lx, lx, 0, 0], [0, 0, ly, ly, 0], color="#7570b3", line_dash="dashed", legend_label="periodic cell")
-    legend_above(fig, columns=3)
+    legend_beside(fig)
     return fig
 
 

@@ -32,6 +32,9 @@ TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 LINE_ROLLOVER = 40000
 PATH_ROLLOVER = 12000
 """Rows a tab keeps of a time series, and segments of a path (a few load cycles of watched contacts)."""
+PLOT_HEIGHT = 316
+"""The least height of a plot: its drawing area is then at least 250 px under a one-line title,
+above its x axis (two plots fill the right of a 1366×768 screen; more scroll)."""
 CHANGE_COLOR = "#7b1fa2"
 """The colour of the change markers: none of the lines' or paths' colours."""
 CYCLES_SHOWN = 6
@@ -63,31 +66,37 @@ def compact(value: float) -> str:
 
 def lab_figure(name: str, title: str, x_label: str, y_label: str, **kwargs):
     """A figure that fills its place (unless ``kwargs`` size it), with compact tick labels and the lab's tools."""
-    kwargs = {"sizing_mode": "stretch_both", "min_height": 200, **kwargs}
+    kwargs = {"sizing_mode": "stretch_both", "min_height": PLOT_HEIGHT, **kwargs}
     fig = figure(name=f"figure-{name}", title=title, tools=TOOLS, x_axis_label=x_label, y_axis_label=y_label,
                  **kwargs)
     fig.toolbar.logo = None
     fig.toolbar.autohide = True
     fig.title.text_font_size = "14px"
+    fig.title.standoff = 2  # every pixel of height goes to the drawing area on a 768-pixel screen
     for axis in (fig.xaxis, fig.yaxis):
         axis.axis_label_text_font_size = "13px"
         axis.axis_label_text_font_style = "normal"
+        axis.axis_label_standoff = 2
         axis.major_label_text_font_size = "12px"
+        axis.major_label_standoff = 3
         axis.formatter = CustomJSTickFormatter(code=COMPACT)
     return fig
 
 
-def legend_above(fig, columns: int | None = None) -> None:
-    """Move the figure's legend above the plot, in a row (it hides no data there)."""
+def legend_beside(fig) -> None:
+    """Move the figure's legend to the right of the plot, one entry a line: there it hides no data,
+    and it takes width, of which a projector's screen has more to spare than height."""
     legend = fig.legend[0]
-    fig.add_layout(legend, "above")
-    legend.orientation = "horizontal"
-    legend.label_text_font_size = "12px"
-    legend.padding = 2
-    legend.spacing = 12
-    legend.margin = 2
-    if columns is not None:
-        legend.ncols = columns
+    fig.add_layout(legend, "right")
+    legend.orientation = "vertical"
+    legend.label_text_font_size = "11px"
+    legend.label_height = 14
+    legend.glyph_height = 14
+    legend.glyph_width = 16
+    legend.padding = 3
+    legend.spacing = 2
+    legend.margin = 4
+    legend.border_line_alpha = 0.0
 
 
 class ChangeMarks:
@@ -129,7 +138,7 @@ class LivePlot:
         self.name = name
         self.figure = fig
         self.sources: list[ColumnDataSource] = []
-        self.pane = pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=200)
+        self.pane = pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=PLOT_HEIGHT, margin=(0, 4, 4, 0))
 
     def clear(self) -> None:
         """Empty the sources of the data (a new preset, a reset, a replay's jump back); the
@@ -172,7 +181,7 @@ class LinePlot(LivePlot):
             self.figure.line(x, y, source=self.source, color=color, line_width=2, line_dash=dash[0] if dash else "solid",
                              **options)
         if len(lines) > 1:
-            legend_above(self.figure)
+            legend_beside(self.figure)
         self.marks = ChangeMarks(self.figure, name, "t") if lines[0][0] == "t" else None
 
     def clear(self):
@@ -237,8 +246,7 @@ class StrainPlot(LivePlot):
 
     def __init__(self, reference: int, name="strain-per-cycle"):
         self.reference = reference
-        fig = lab_figure(name, "Strain at the start of each cycle", "cycle N",
-                         "γ(N) − γ(N_ref)   (γ = L_y/L_y0 − L_x/L_x0, Eq. 2)")
+        fig = lab_figure(name, "Strain at the start of each cycle", "cycle N", "γ(N) − γ(N_ref)  (Eq. 2)")
         super().__init__(name, fig)
         fig.x_range = Range1d(0, 1)
         fig.y_range = Range1d(-1, 1)
@@ -246,11 +254,11 @@ class StrainPlot(LivePlot):
         self.before = ColumnDataSource({"cycle": [], "strain": []}, name="strain-before-fit")
         self.fit = ColumnDataSource({"cycle": [], "strain": []}, name="strain-fit")
         self.sources = [self.points, self.before, self.fit]
-        fig.scatter("cycle", "strain", source=self.before, size=7, color="#b0b0b0",
-                    legend_label="before the fit (settling)")
-        fig.scatter("cycle", "strain", source=self.points, size=7, legend_label="γ − γ_ref at the start of a cycle")
-        fig.line("cycle", "strain", source=self.fit, color="#d62728", line_width=2, legend_label="fitted line")
-        legend_above(fig, columns=2)
+        fig.scatter("cycle", "strain", source=self.before, size=7, color="#b0b0b0", legend_label="settling")
+        fig.scatter("cycle", "strain", source=self.points, size=7, legend_label="γ at a cycle start")
+        fig.line("cycle", "strain", source=self.fit, color="#d62728", line_width=2, legend_label="fit")
+        legend_beside(fig)
+        self.settle_item, _, self.fit_item = fig.legend[0].items
         self.marks = ChangeMarks(fig, name, "cycle")
         self.cycles: dict[int, float] = {}
         self._shown = None
@@ -272,17 +280,17 @@ class StrainPlot(LivePlot):
         fit = status.get("strain")
         fit_from = status.get("fit_from") or {"cycle": self.reference, "after": ""}
         start = fit_from["cycle"]
-        after = f" ({fit_from['after']})" if fit_from.get("after") else ""
-        key = (len(self.cycles), start, None if fit is None else fit["dgamma"])
+        key = (len(self.cycles), start, fit_from.get("after"), None if fit is None else fit["dgamma"])
         if key == self._shown:
             return
         self._shown = key
+        self.settle_item.label = {"value": fit_from.get("after") or "settling"}
         fig = self.figure
         first = min(self.reference, start)
         if first not in self.cycles:
             for source in self.sources:
                 source.data = {"cycle": [], "strain": []}
-            fig.title.text = f"Strain at the start of each cycle, from cycle {first} on (not reached yet)"
+            fig.title.text = f"Strain per cycle, from cycle {first} (not reached yet)"
             return
         reference = start if start in self.cycles else first
         cycles = np.array(sorted(c for c in self.cycles if c >= first), dtype=float)
@@ -294,16 +302,15 @@ class StrainPlot(LivePlot):
         low, high = float(strain.min()), float(strain.max())
         if fit is None:
             self.fit.data = {"cycle": [], "strain": []}
-            fig.title.text = f"Strain per cycle, fit from cycle {start}{after}:\nthe fit needs 3 cycles"
+            fig.title.text = f"Strain per cycle: the fit from cycle {start} needs 3 cycles"
         else:
             ends = np.array([start, cycles[-1]], dtype=float)
             line = fit["mean_gamma"] - fit["gamma_ref"] + fit["dgamma"] * (ends - fit["mean_cycle"])
             self.fit.data = {"cycle": ends, "strain": line}
             low, high = min(low, float(line.min())), max(high, float(line.max()))
-            verdict = "ratcheting: the points lie on the line" if fit["ratcheting"] else \
-                "no clear ratcheting: scatter exceeds drift"
-            fig.title.text = (f"Δγ = {compact(fit['dgamma'])} per cycle, fit from cycle {start}{after}\n"
-                              f"{verdict} (RMS {compact(fit['rms'])})")
+            verdict = "ratcheting" if fit["ratcheting"] else "no clear ratcheting"
+            fig.title.text = f"Δγ = {compact(fit['dgamma'])} per cycle from cycle {start}: {verdict}"
+            self.fit_item.label = {"value": "fit" + (" (scatter > drift)" if not fit["ratcheting"] else "")}
         pad = 0.08 * (high - low) if high > low else max(abs(high), 1e-12)
         fig.y_range.start, fig.y_range.end = low - pad, high + pad
 
@@ -315,8 +322,8 @@ class LoadStrainPlot(LivePlot):
     reads = ("time",)
 
     def __init__(self, name="q-gamma"):
-        fig = lab_figure(name, "Load q against strain γ (ratcheting Fig. 1)", "γ = L_y/L_y0 − L_x/L_x0",
-                         "q = Δσ (1 − cos ωt)  (Eq. 1, units of P0)")
+        fig = lab_figure(name, "Load q against strain γ (ratcheting Fig. 1)", "γ = L_y/L_y0 − L_x/L_x0  (Eq. 2)",
+                         "q  (Eq. 1, units of P0)")
         super().__init__(name, fig)
         self.source = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "cycle": []}, name="q-gamma-path")
         self.sources = [self.source]
@@ -353,8 +360,7 @@ class ConePlot(LivePlot):
     sliding samples marked by side, and the Coulomb cone |F_t| = μ (F_n + F0) dashed."""
 
     def __init__(self, name, title, series, keyed: bool):
-        fig = lab_figure(name, title, "F_n = N^e − F0  (normal force without its viscous part, paper units)",
-                         "F_t  (tangential force, paper units)")
+        fig = lab_figure(name, title, "F_n = Nᵉ − F0  (elastic normal force)", "F_t  (tangential force)")
         super().__init__(name, fig)
         self.reads = (series,)
         self.keyed = keyed
@@ -364,14 +370,14 @@ class ConePlot(LivePlot):
         self.cone = ColumnDataSource({"x": [], "y": []}, name=f"{name}-cone")
         self.sources = [self.paths, self.sliding, self.cone]
         fig.line("x", "y", source=self.cone, color="#333333", line_dash="dashed", line_width=1.5,
-                 legend_label="Coulomb cone |F_t| = μ(F_n+F0)")
+                 legend_label="|F_t| = μ(F_n+F0)")
         fig.segment("x0", "y0", "x1", "y1", source=self.paths, color="color", line_width=2, legend_field="label")
         fig.scatter("x", "y", source=self.sliding, color="color", marker="marker", size=7)
         for code, marker in ((STATUS_SLIDE_POS, "triangle"), (STATUS_SLIDE_NEG, "inverted_triangle")):
             # an empty renderer per sliding side: the legend names the markers drawn above
             label, color = STATUS_LEGEND[code]
             fig.scatter(np.array([np.nan]), np.array([np.nan]), color=color, marker=marker, size=7, legend_label=label)
-        legend_above(fig, columns=3)
+        legend_beside(fig)
         self.segments = Segments()
         self.top = 0.0
         self._cone_key = None
@@ -424,7 +430,7 @@ class ConePlot(LivePlot):
         self._cone_key = key
         if math.isinf(mu):
             self.cone.data = {"x": [], "y": []}
-            self.figure.title.text = self.figure.title.text.split(" — ")[0] + " — μ = ∞: the cone is the half-plane"
+            self.figure.title.text = self.figure.title.text.split(" — ")[0] + " — μ = ∞, no cone"
             return
         top = 1.1 * self.top
         self.cone.data = {"x": [top, -f0, top], "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
@@ -439,9 +445,9 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
     if name == "q-gamma":
         return LoadStrainPlot()
     if name == "coulomb-cone":
-        return ConePlot(name, "Watched contacts in the (F_n, F_t) plane", "contacts", keyed=True)
+        return ConePlot(name, "Watched contacts, Coulomb cone", "contacts", keyed=True)
     if name == "block-cone":
-        return ConePlot(name, "The block's contact in the (F_n, F_t) plane (Fig. 3)", "block", keyed=False)
+        return ConePlot(name, "The block's contact, Coulomb cone (Fig. 3)", "block", keyed=False)
     lines = LINES[name]
     plot = LinePlot(name, lines["title"], lines["series"], lines["lines"], lines.get("x", time_label), lines["y"],
                     series.get(lines["series"], lines.get("columns", ())), **lines.get("options", {}))
@@ -520,18 +526,18 @@ class AnalysisFigures:
                 network.line(nowhere, nowhere, color=color, line_width=2, legend_label=text)
             else:
                 network.scatter(nowhere, nowhere, color=color, marker="diamond", size=8, legend_label=text)
-        legend_above(network, columns=2)
+        legend_beside(network)
         forces = lab_figure("analysis-forces", "Interaction forces (N, T) (Gilabert Fig. 14)", "N (paper units)",
                             "T (paper units)")
         forces.scatter("normal", "tangential", source=src["forces"], size=3, alpha=0.5, legend_label="an interaction")
         forces.multi_line("xs", "ys", source=src["lines"], color="#555555", line_dash="dashed",
                           legend_label="T = ±√3 N")
-        legend_above(forces)
+        legend_beside(forces)
         structure = lab_figure("analysis-structure", "I(k) and its fit by Gilabert Eq. 28", "k (1/length)",
                                "I(k) (Eq. 25)", x_axis_type="log", y_axis_type="log")
         structure.scatter("k", "intensity", source=src["data"], size=4, legend_label="I(k) of the state")
         structure.line("k", "fitted", source=src["fit"], color="#d62728", line_width=2, legend_label="fit of Eq. 28")
-        legend_above(structure)
+        legend_beside(structure)
         self.figures = {"network": network, "forces": forces, "structure": structure}
 
     def show(self, result) -> tuple[str, ...]:

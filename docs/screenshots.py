@@ -73,7 +73,7 @@ def shoot(url: str, out: Path, sizes: list[tuple[int, int]], presets: list[str])
             page.goto(url, timeout=120000, wait_until="domcontentloaded")
             page.wait_for_selector(".preset-select select", timeout=120000)
             for name in presets:
-                page.select_option(".preset-select select", label=PRESETS[name].title)
+                page.select_option(".preset-select select", label=PRESETS[name].menu_name)
                 while read_status(url)["preset"] != name:
                     time.sleep(0.2)
                 default = PRESETS[name].defaults.get("speed", 1.0)

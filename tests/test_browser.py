@@ -111,7 +111,7 @@ def wait_model(page, name: str, condition: str, timeout=60000):
 
 
 def choose_preset(page, lab, name: str):
-    page.select_option(".preset-select select", label=PRESETS[name].title)
+    page.select_option(".preset-select select", label=PRESETS[name].menu_name)
     wait_status(lab, lambda s: s["preset"] == name)
 
 
@@ -349,6 +349,81 @@ def test_a_loading_change_shows_the_value_in_effect_until_the_next_cycle(page, l
     wait_model(page, "strain-per-cycle-changes", "m.data.text.includes('μ 0.2 → ∞')")
     wait_model(page, "strain-per-cycle-changes", "m.data.text.some(t => t.startsWith('Δσ 0.2 → 0.25'))")
     expect(page.locator(".note-friction")).to_contain_text("applied", timeout=5000)
+
+
+LAYOUT = r"""() => {
+  const ctx = document.createElement("canvas").getContext("2d");
+  const width = (text, size, style, family) => {
+    ctx.font = `${style || "normal"} ${size} ${family || "helvetica"}`;
+    return Math.max(...String(text).split("\n").map(line => ctx.measureText(line).width));
+  };
+  const views = [];
+  const walk = (view) => {
+    if (view.model.type === "Figure" && view.model.name && view.model.name.startsWith("figure-")) views.push(view);
+    for (const c of (view.child_views ?? [])) walk(c);
+  };
+  for (const r of Bokeh.index.roots) walk(r);
+  const out = [];
+  for (const v of views) {
+    const rect = v.el.getBoundingClientRect();
+    if (rect.width === 0 || rect.height === 0 || v.el.offsetParent === null) continue;   // not shown
+    const m = v.model, f = v.frame.bbox, c = v.bbox;
+    const problems = [];
+    const title = m.title;
+    if (title && title.text) {
+      const w = width(title.text, title.text_font_size, title.text_font_style, title.text_font);
+      const left = f.left + (title.offset || 0);
+      if (left + w > c.width + 1) problems.push(`title runs ${Math.round(left + w - c.width)} px off the right`);
+    }
+    for (const axis of [...m.below, ...m.left]) {
+      if (!axis.axis_label) continue;
+      const w = width(axis.axis_label, axis.axis_label_text_font_size, axis.axis_label_text_font_style, axis.axis_label_text_font);
+      const vertical = m.left.includes(axis);
+      const span = vertical ? c.height : c.width;
+      const centre = vertical ? f.top + f.height / 2 : f.left + f.width / 2;
+      if (centre - w / 2 < -1 || centre + w / 2 > span + 1) problems.push(`${vertical ? "y" : "x"} label cut (${Math.round(w)} px on ${Math.round(span)})`);
+    }
+    for (const rv of v.renderer_views.values()) {
+      if (rv.model.type !== "Legend" || !rv.bbox || !(rv.bbox.width > 0)) continue;
+      const b = rv.bbox;
+      if (b.left < -1 || b.top < -1 || b.right > c.width + 1 || b.bottom > c.height + 1) problems.push("legend outside its figure");
+      const overlap = !(b.right <= f.left + 1 || b.left >= f.right - 1 || b.bottom <= f.top + 1 || b.top >= f.bottom - 1);
+      if (overlap) problems.push("legend covers the plot");
+    }
+    if (f.height < 250) problems.push(`plot area ${Math.round(f.height)} px high`);
+    out.push({name: m.name, frame: Math.round(f.height), width: Math.round(f.width), problems});
+  }
+  return out;
+}"""
+"""Each bokeh figure shown in the page, measured as a viewer would look at it: its name, the height of
+its drawing area, and what is wrong (a title running off its figure, an axis label cut, a legend
+outside its figure or over the plot, a drawing area under 250 px)."""
+
+
+@pytest.mark.parametrize("size", [(1366, 768), (1920, 1080)])
+def test_every_plot_of_every_preset_is_readable_on_a_projector(browser, lab, size):
+    page = browser.new_page(viewport={"width": size[0], "height": size[1]})
+    open_dashboard(page, lab, "ratchet16")
+    seen = []
+    for name, cls in PRESETS.items():
+        choose_preset(page, lab, name)
+        box = page.locator(".preset-select select").bounding_box()
+        width = page.locator(".preset-select select").evaluate(
+            "s => { const c = document.createElement('canvas').getContext('2d'); c.font = getComputedStyle(s).font; "
+            "return c.measureText(s.selectedOptions[0].text).width; }")
+        assert width + 24 <= box["width"], f"{name}: the preset selector cuts {cls.menu_name!r}"
+        if name == "ratchet16":  # its watched contacts fill the cone plot's legend
+            wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
+        time.sleep(1.0)
+        for pane in ("Key plots", "More plots"):
+            page.locator(".pane-choice button", has_text=pane).click()
+            time.sleep(1.0)
+            for figure in page.evaluate(LAYOUT):
+                seen.append((name, pane, figure["name"]))
+                assert not figure["problems"], f"{size} {name}, {pane}, {figure['name']}: {figure['problems']}"
+                assert figure["frame"] >= 250
+    assert len(seen) == sum(len(cls.plots) for cls in PRESETS.values())
+    page.close()
 
 
 def test_preset_switch_builds_its_plots_and_its_text(page, lab):

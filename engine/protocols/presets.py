@@ -70,6 +70,8 @@ class Preset(ABC):
 
     name = ""
     title = ""
+    #: the preset selector's short name (whole at 1366×768)
+    menu_name = ""
     #: controls that act on this preset (the dashboard greys out the others)
     controls: tuple[str, ...] = ()
     #: settings this preset starts from, over LabSettings' defaults
@@ -424,6 +426,7 @@ class RatchetPreset(Preset):
 
     name = "ratchet"
     title = "Biaxial box under cyclic loading"
+    menu_name = "Biaxial box, cyclic loading"
     controls = ("pressure", "amplitude", "period", "phase", "particles", "seed") + LAW_CONTROLS
     defaults = {"particles": 256, "speed": math.inf}
     series = {"time": ("t", "cycle", "q", "gamma", "kinetic", "stored", "dissipated", "balance", "z"),
@@ -660,6 +663,7 @@ def strain_fit(cycle_gamma, reference_cycle: int, verdict=None) -> dict | None:
 class Ratchet16Preset(RatchetPreset):
     name = "ratchet16"
     title = "Ratcheting with 16 disks (ratcheting Figs. 1-4)"
+    menu_name = "Ratcheting, 16 disks (Figs. 1–4)"
     defaults = {"particles": 16, "speed": 0.5}
     key_plots = ("strain-per-cycle", "coulomb-cone")
     watch_count = 6
@@ -668,6 +672,7 @@ class Ratchet16Preset(RatchetPreset):
 class EllipticPreset(RatchetPreset):
     name = "elliptic"
     title = "Elliptic loading without sliding (ratcheting Figs. 5-6)"
+    menu_name = "Elliptic loading (Figs. 5–6)"
     defaults = {"particles": 16, "friction": math.inf, "phase": 90.0, "speed": 0.5}
     key_plots = ("strain-per-cycle", "coulomb-cone")
     elliptic = True
@@ -685,6 +690,7 @@ class ClosedPathPreset(Preset):
 
     name = "closed-path"
     title = "A closed path, every tangential spring (ratcheting Figs. 8-9)"
+    menu_name = "Closed path, every spring (Figs. 8–9)"
     controls = ()
     defaults = {"particles": 2, "friction": math.inf, "damping_ratio": 0.0, "speed": 0.5}
     series = {"springs": ("t",) + tuple(f"dt_{model.key}" for model in TANGENTIAL.values())
@@ -765,6 +771,7 @@ class BlockPreset(Preset):
 
     name = "block"
     title = "A block on a plane: the principle of minimum sliding (quasi-rigidity Figs. 2-3)"
+    menu_name = "Block on a plane: minimum sliding"
     controls = ("friction", "period", "damping_ratio")
     defaults = {"particles": 1, "friction": 0.5, "period": 20.0, "damping_ratio": 0.7, "speed": 0.5}
     series = {"block": ("t", "load_ratio", "normal", "tangential", "status", "velocity")}
@@ -851,6 +858,7 @@ class AggregationPreset(GilabertPreset):
 
     name = "aggregation"
     title = "Cohesive powder: aggregation (Gilabert method 2, Figs. 4 and 11)"
+    menu_name = "Cohesive aggregation (Gilabert 2)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "particles", "seed", "damping_ratio")
     defaults = {"particles": 300, "friction": 0.15, "cohesion_force": 1.0, "cohesion_range": 1e-3,
                 "damping_ratio": 0.8, "speed": math.inf, "frames_per_cycle": 0.2}
@@ -931,6 +939,7 @@ class CompressionPreset(GilabertPreset):
 
     name = "compression"
     title = "Compression of a granular gas (Gilabert method 1)"
+    menu_name = "Compression of a gas (Gilabert 1)"
     controls = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "particles", "seed",
                 "damping_ratio")
     defaults = {"particles": 300, "friction": 0.15, "damping_ratio": 0.8, "speed": math.inf, "frames_per_cycle": 0.2}
