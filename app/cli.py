@@ -33,7 +33,8 @@ def build_parser():
                         help="FILE.png (one picture; one per frame, FILE_00012.png, for several), FILE.gif or FILE.mp4")
     render.add_argument("--frames", metavar="A:B:S",
                         help="a frame K or a range A:B:S, negative counting from the end; a range starting with "
-                             "'-' is written --frames=-10: (default: the last frame for .png, every frame for a movie)")
+                             "'-' is written --frames=-10: (default: the last frame for .png; for a movie the last "
+                             "10 load cycles, or clock units, of a run that names its cycle, else its last 100 frames)")
     render.add_argument("--size", default="1280x720", metavar="WxH", help="picture size in pixels (default 1280x720)")
     render.add_argument("--color", default="rotation", metavar="FIELD",
                         help="disk colours: rotation, coordination, pressure or sliding (default rotation)")
@@ -67,7 +68,16 @@ def _render(args) -> dict:
     from .render import render_run
 
     return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps,
-                      args.force)
+                      args.force, progress=_render_progress)
+
+
+def _render_progress(done: int, total: int) -> None:
+    """``rendering frame 12 of 100`` on standard error: on one line a terminal rewrites, else at
+    every tenth of the frames."""
+    if sys.stderr.isatty():
+        print(f"\rrendering frame {done} of {total}", end="\n" if done == total else "", file=sys.stderr, flush=True)
+    elif done == total or done % max(1, total // 10) == 0:
+        print(f"rendering frame {done} of {total}", file=sys.stderr, flush=True)
 
 
 def _print_render(result: dict) -> None:

@@ -203,6 +203,8 @@ class Dashboard:
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
 
     def _friction(self) -> None:
+        self.friction.disabled = self.no_sliding.value or self.viewer  # μ = ∞: the slider's value is not in effect
+        self.friction.name = "Friction μ (not in effect: μ = ∞)" if self.no_sliding.value else "Friction μ"
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
 
     def _control(self, key: str, value) -> None:
@@ -232,7 +234,15 @@ class Dashboard:
     def _command(self, command: str, **payload) -> None:
         if self._syncing or self.viewer:
             return
+        self._clear_errors()
         self.engine.submit(command, **payload)
+
+    def _clear_errors(self) -> None:
+        """A new action: the refusals of earlier ones go (the values they concern show the values in effect)."""
+        for key, shown in list(self._note_shown.items()):
+            if shown == math.inf:
+                self.notes[key].visible = False
+                del self._note_shown[key]
 
     def _color(self, event) -> None:
         if self.viewer:  # the scene is shared: its colours are the presenter's choice
@@ -506,7 +516,9 @@ class Dashboard:
             if widget is self.no_sliding:
                 widget.value = value == math.inf
             elif widget is self.friction:
-                widget.value = 0.2 if value == math.inf else float(value)
+                widget.value = widget.value if value == math.inf else float(value)
+                widget.disabled = widget.disabled or value == math.inf
+                widget.name = "Friction μ (not in effect: μ = ∞)" if value == math.inf else "Friction μ"
             else:
                 widget.value = value
         self.apply_reset.visible = "particles" in used

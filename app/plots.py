@@ -378,6 +378,9 @@ class ConePlot(LivePlot):
             label, color = STATUS_LEGEND[code]
             fig.scatter(np.array([np.nan]), np.array([np.nan]), color=color, marker=marker, size=7, legend_label=label)
         legend_beside(fig)
+        items = fig.legend[0].items
+        #: the cone and the sliding marks: not in the legend where μ = ∞ (neither can occur)
+        self.friction_items = [items[0]] + items[-2:]
         self.segments = Segments()
         self.top = 0.0
         self._cone_key = None
@@ -428,6 +431,8 @@ class ConePlot(LivePlot):
         if key == self._cone_key or self.top <= 0.0:
             return
         self._cone_key = key
+        for item in self.friction_items:
+            item.visible = not math.isinf(mu)
         if math.isinf(mu):
             self.cone.data = {"x": [], "y": []}
             self.figure.title.text = self.figure.title.text.split(" — ")[0] + " — μ = ∞, no cone"

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 import re
 import time
@@ -607,14 +608,42 @@ def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
                                                                                                   raw["step"])
 
 
+MOVIE_CYCLES = 10
+MOVIE_FRAMES = 100
+"""A movie's default length: the last MOVIE_CYCLES load cycles (or clock units) of a run that
+names its cycle, else its last MOVIE_FRAMES frames: a short clip for a slide, in a minute or so."""
+
+
+def default_movie_frames(f, count: int) -> list[int]:
+    """The frames of a movie made without ``--frames``: those of the last MOVIE_CYCLES cycles
+    (the lab's ``cycle_time`` or a study's ``period`` in the file's protocol), else the last
+    MOVIE_FRAMES."""
+    protocol = json.loads(h5md.parameters(f).get("protocol_json", "{}") or "{}")
+    cycle = protocol.get("cycle_time") or protocol.get("period")
+    if isinstance(cycle, (int, float)) and cycle > 0:
+        times = f["particles/all/position/time"][:count]
+        first = int(np.searchsorted(times, times[-1] - MOVIE_CYCLES * cycle - 1e-9 * abs(cycle)))
+        return list(range(min(first, count - 2) if count > 1 else 0, count))
+    return list(range(max(0, count - MOVIE_FRAMES), count))
+
+
+def _reporting(frames: Iterator, total: int, progress: Callable[[int, int], None]) -> Iterator:
+    """``frames``, calling ``progress(done, total)`` as each one is taken for rendering."""
+    for done, frame in enumerate(frames):
+        progress(done, total)
+        yield frame
+    progress(total, total)
+
+
 def render_run(path, out, frames=None, size="1280x720", color_field: str = "rotation", forces: bool = True,
-               fps=10.0, force: bool = False) -> dict:
+               fps=10.0, force: bool = False, progress: Callable[[int, int], None] | None = None) -> dict:
     """Render frames of a GranLab run file into ``out`` (:func:`write_movie`); what
     ``granlab render`` calls, so errors name its options. Existing pictures or movies are
     written over only with ``force``.
 
-    ``frames``: see :func:`select_frames`; default the last frame for ``.png``, every frame
-    for a movie. ``size`` (W, H) or ``"WxH"``; ``fps`` frames per second of a movie. The axes
+    ``frames``: see :func:`select_frames`; default the last frame for ``.png``, the last ten
+    cycles (:func:`default_movie_frames`) for a movie. ``progress(done, total)`` is called as
+    frames are rendered. ``size`` (W, H) or ``"WxH"``; ``fps`` frames per second of a movie. The axes
     are the union of the selected frames' bounds (read in a first pass, the frames rendered in
     a second). Returns ``out``, the ``files`` written, ``frames`` (their count), ``indices``
     (first and last), ``size`` [W, H], ``color``, ``forces``, ``fps`` and ``seconds_per_frame``.
@@ -630,12 +659,18 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
         h5md.require_run_file(f, "render")
         if count == 0:
             raise h5md.RunFileError(f"{str(path)!r} holds no complete frame")
-        indices = select_frames(("-1" if suffix == ".png" else ":") if frames is None else frames, count, "--frames")
+        if frames is None:
+            indices = [count - 1] if suffix == ".png" else default_movie_frames(f, count)
+        else:
+            indices = select_frames(frames, count, "--frames")
         targets = [png_name(out, index) for index in indices] if suffix == ".png" and len(indices) > 1 else [out]
         for target in targets:
             check_output(target, force=force)
         bounds = union_bounds(frame for frame, _ in run_frames(f, indices))
-        written = write_movie(run_frames(f, indices), out, size, color_field, forces, fps, bounds, indices)
+        frames_read = run_frames(f, indices)
+        if progress is not None:
+            frames_read = _reporting(frames_read, len(indices), progress)
+        written = write_movie(frames_read, out, size, color_field, forces, fps, bounds, indices)
     return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,
             "indices": [indices[0], indices[-1]], "size": list(size), "color": color_field, "forces": forces,
             "fps": fps, "seconds_per_frame": (time.perf_counter() - start) / written}

@@ -7,6 +7,7 @@ run; elsewhere they skip when no Chromium is installed.
 """
 
 import json
+import math
 import os
 import shutil
 import time
@@ -316,39 +317,43 @@ def test_a_hostile_file_and_a_save_never_stop_the_simulation(page, lab):
 
 def test_a_loading_change_shows_the_value_in_effect_until_the_next_cycle(page, lab):
     """Δσ typed while cycling waits for the next cycle: the box keeps the value in effect, the line
-    beside it says what comes and when; a change of μ is marked on the strain plot and the fit
-    starts after it."""
+    beside it says what comes and when (counted down at 0.05 cycles per second), Cancel drops it;
+    a change of μ is marked on the strain plot and the fit starts two whole cycles after it."""
     open_dashboard(page, lab, "ratchet16")
     choose_preset(page, lab, "ratchet16")
     wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
+    page.click(".play-button button")  # paused: a waiting change waits for the run to go on
+    wait_status(lab, lambda s: s["state"] == "paused", timeout=5)
     type_into(page, ".amplitude-input", "0.25")
     s = wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.25}, timeout=5)
     assert s["settings"]["amplitude"] == 0.2
-    expect(page.locator(".note-amplitude")).to_contain_text("from the next cycle: Amplitude Δσ = 0.25 (in ",
-                                                            timeout=5000)
+    expect(page.locator(".note-amplitude")).to_contain_text("from the next cycle: Amplitude Δσ = 0.25 (when the run "
+                                                            "goes on)", timeout=5000)
     expect(page.locator(".amplitude-input input")).to_have_value("0.2", timeout=5000)
-    cycle = s["cycle"]
+    page.click(".cancel-pending-button button")
+    wait_status(lab, lambda s: not s["pending"] and s["settings"]["amplitude"] == 0.2, timeout=5)
+    expect(page.locator(".note-pending")).to_contain_text("cancelled: Δσ = 0.25 (the values in effect stay)")
+    expect(page.locator(".note-amplitude")).to_be_hidden(timeout=5000)
+    set_speed(page, lab, "0.05")  # a cycle lasts 20 s
+    type_into(page, ".amplitude-input", "0.25")
+    cycle = wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.25}, timeout=5)["cycle"]
+    page.click(".play-button button")
+    expect(page.locator(".note-amplitude")).to_contain_text("from the next cycle: Amplitude Δσ = 0.25 (in ",
+                                                            timeout=10000)
+    set_speed(page, lab, "max")
     s = wait_status(lab, lambda s: s["cycle"] > cycle, timeout=60)
     assert s["settings"]["amplitude"] == 0.25 and not s["pending"]
     expect(page.locator(".amplitude-input input")).to_have_value("0.25", timeout=5000)
     expect(page.locator(".note-amplitude")).to_be_hidden(timeout=5000)
-    page.click(".play-button button")  # paused, a waiting change waits for the run to go on
-    wait_status(lab, lambda s: s["state"] == "paused", timeout=5)
-    type_into(page, ".amplitude-input", "0.2")
-    wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.2}, timeout=5)
-    expect(page.locator(".note-amplitude")).to_contain_text("(when the run goes on)", timeout=5000)
-    page.click(".cancel-pending-button button")
-    wait_status(lab, lambda s: not s["pending"] and s["settings"]["amplitude"] == 0.25, timeout=5)
-    expect(page.locator(".note-pending")).to_contain_text("cancelled: Δσ = 0.2 (the values in effect stay)")
-    page.click(".play-button button")
-    wait_status(lab, lambda s: s["state"] == "running", timeout=5)
     page.check(".friction-infinite input")
     s = wait_status(lab, lambda s: s["settings"]["friction"] == "inf", timeout=5)
-    fit = s["fit_from"]
-    assert fit["cycle"] == s["cycle"] + 3 and fit["after"] == "after μ 0.2 → ∞"  # two whole cycles after it
+    change = s["changes"][-1]
+    assert change["text"] == "μ 0.2 → ∞" and s["fit_from"] == {"cycle": math.ceil(change["cycle"]) + 2,
+                                                               "after": "after μ 0.2 → ∞"}
     wait_model(page, "strain-per-cycle-changes", "m.data.text.includes('μ 0.2 → ∞')")
     wait_model(page, "strain-per-cycle-changes", "m.data.text.some(t => t.startsWith('Δσ 0.2 → 0.25'))")
     expect(page.locator(".note-friction")).to_contain_text("applied", timeout=5000)
+    expect(page.locator(".friction-slider")).to_contain_text("not in effect: μ = ∞")
 
 
 LAYOUT = r"""() => {

@@ -12,7 +12,7 @@ import pytest
 from app.cli import main
 from app.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
                          disk_colors)
-from app.render import render_image, run_frames, write_movie
+from app.render import default_movie_frames, render_image, run_frames, write_movie
 from engine.io import h5md
 from engine.io.scene import parse_scene
 
@@ -118,7 +118,7 @@ def test_png_has_the_size_asked_and_the_disks_in_their_palette_colours(pile, tmp
 
 def test_gif_and_mp4_have_the_frames_and_size_asked(pile, tmp_path):
     gif = tmp_path / "pile.gif"
-    assert _render(pile, "--out", gif, "--size", "640x360") == 0  # a movie: every frame by default
+    assert _render(pile, "--out", gif, "--size", "640x360") == 0  # a movie: its last 100 frames by default
     frames = iio.imread(gif, index=None)
     assert frames.shape == (FRAMES, 360, 640, 3)
     mp4 = tmp_path / "pile.mp4"
@@ -127,6 +127,24 @@ def test_gif_and_mp4_have_the_frames_and_size_asked(pile, tmp_path):
     assert reader.get_meta_data()["fps"] == 4.0
     images = [reader.get_data(k) for k in range(reader.count_frames())]
     assert [image.shape for image in images] == [(270, 480, 3)] * 2  # frames 1 and 3
+
+
+def test_a_movie_is_the_last_ten_cycles_by_default_and_shows_its_progress(tmp_path, capsys):
+    """A run that names its cycle (the lab's cycle_time): its last 10 cycles; without one, the last
+    100 frames. ``granlab render`` says how far it got on standard error."""
+    sim = parse_scene(CELL).build()
+    path = tmp_path / "cycled.h5"
+    with h5md.RunWriter(path, sim, scene=CELL, protocol={"cycle_time": 20 * sim.dt}) as writer:
+        for _ in range(30):  # a frame every 10 steps: two frames a cycle
+            writer.write_frame(sim)
+            sim.run(10)
+    with h5md.open_run(path) as f:
+        assert default_movie_frames(f, 30) == list(range(9, 30))  # from t_last - 10 cycles: 21 frames
+        assert default_movie_frames(f, 2) == [0, 1]
+    assert _render(path, "--out", tmp_path / "last.gif", "--size", "480x270") == 0
+    assert len(iio.imread(tmp_path / "last.gif", index=None)) == 21
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "rendering frame 0 of 21" and err[-1] == "rendering frame 21 of 21" and len(err) <= 12
 
 
 def test_a_movie_keeps_its_framing_while_the_pile_settles(pile, tmp_path):
