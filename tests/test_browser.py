@@ -420,9 +420,16 @@ def test_every_plot_of_every_preset_is_readable_on_a_projector(browser, lab, siz
         if name == "ratchet16":  # its watched contacts fill the cone plot's legend
             wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
         time.sleep(1.0)
-        for pane in ("Key plots", "More plots"):
+        for pane, plots in (("Key plots", cls.key_plots), ("More plots", set(cls.plots) - set(cls.key_plots))):
             page.locator(".pane-choice button", has_text=pane).click()
-            time.sleep(1.0)
+            expected = {f"figure-{plot}" for plot in plots}
+            deadline = time.time() + 20.0
+            shown = set()
+            while shown != expected:
+                assert time.time() < deadline, f"{name}, {pane}: {shown}, not {expected}"
+                time.sleep(0.2)
+                shown = {figure["name"] for figure in page.evaluate(LAYOUT)}
+            time.sleep(0.5)  # the last layout pass
             for figure in page.evaluate(LAYOUT):
                 seen.append((name, pane, figure["name"]))
                 assert not figure["problems"], f"{size} {name}, {pane}, {figure['name']}: {figure['problems']}"
