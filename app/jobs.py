@@ -11,6 +11,10 @@ progress, kills it when the user cancels or its time limit runs out, and hands t
 
 A job's outcome is a :class:`JobOutcome`: its result, or an error message that says what went
 wrong (a child that dies says how), or that it was cancelled.
+
+As with any spawned process (and Dask's local cluster), a script that starts the lab's engine
+itself must do so under ``if __name__ == "__main__":``: the child imports the script's module.
+``granlab serve`` and notebooks need nothing.
 """
 
 from __future__ import annotations
