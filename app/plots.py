@@ -73,6 +73,7 @@ def lab_figure(name: str, title: str, x_label: str, y_label: str, **kwargs):
     fig.toolbar.autohide = True
     fig.title.text_font_size = "14px"
     fig.title.standoff = 2  # every pixel of height goes to the drawing area on a 768-pixel screen
+    fig.xaxis.ticker.desired_num_ticks = 5  # a plot beside its legend is narrow: long tick labels must not touch
     for axis in (fig.xaxis, fig.yaxis):
         axis.axis_label_text_font_size = "13px"
         axis.axis_label_text_font_style = "normal"
@@ -298,6 +299,7 @@ class StrainPlot(LivePlot):
         fitted = cycles >= start
         self.points.data = {"cycle": cycles[fitted], "strain": strain[fitted]}
         self.before.data = {"cycle": cycles[~fitted], "strain": strain[~fitted]}
+        self.settle_item.visible = bool(np.any(~fitted))  # a legend entry only for points drawn
         fig.x_range.start, fig.x_range.end = first - 0.5, max(cycles[-1], start + 3) + 0.5
         low, high = float(strain.min()), float(strain.max())
         if fit is None:
