@@ -272,19 +272,21 @@ def test_a_typo_in_the_period_never_freezes_the_lab(page, lab):
     assert s["cycle_time"] == 20.0 and not s["pending"]  # at once, at the same fraction of the cycle
     type_into(page, ".period-input", "10")
     wait_status(lab, lambda s: s["cycle_time"] == 10.0, timeout=5)
+    play = page.locator(".play-button button")
     page.click(".step-button button")
     assert answers_within(lab, lambda s: s["state"] in ("stepping", "paused"), 0.5 + 0.4) < 0.9
-    page.click(".play-button button")  # Pause while stepping, Play once paused
-    wait_status(lab, lambda s: s["state"] in ("running", "paused"), timeout=1)
-    if status(lab)["state"] == "paused":
-        page.click(".play-button button")
+    wait_status(lab, lambda s: s["state"] == "paused", timeout=10)
+    expect(play).to_have_text("Play", timeout=5000)  # the button follows the state (every 0.2 s)
+    play.click()
     step = wait_status(lab, lambda s: s["state"] == "running", timeout=2)["step"]
-    page.click(".play-button button")
+    expect(play).to_have_text("Pause", timeout=5000)
+    play.click()
     assert answers_within(lab, lambda s: s["state"] == "paused", 1.0) < 0.5 + 0.4  # /status is read every 0.2 s
     paused = status(lab)["step"]
     time.sleep(0.5)
     assert status(lab)["step"] == paused >= step
-    page.click(".play-button button")
+    expect(play).to_have_text("Play", timeout=5000)
+    play.click()
     wait_status(lab, lambda s: s["state"] == "running", timeout=2)
 
 
@@ -322,6 +324,7 @@ def test_a_loading_change_shows_the_value_in_effect_until_the_next_cycle(page, l
     open_dashboard(page, lab, "ratchet16")
     choose_preset(page, lab, "ratchet16")
     wait_status(lab, lambda s: s.get("cycle", 0) >= 1, timeout=120)
+    expect(page.locator(".play-button button")).to_have_text("Pause", timeout=5000)
     page.click(".play-button button")  # paused: a waiting change waits for the run to go on
     wait_status(lab, lambda s: s["state"] == "paused", timeout=5)
     type_into(page, ".amplitude-input", "0.25")
@@ -337,6 +340,7 @@ def test_a_loading_change_shows_the_value_in_effect_until_the_next_cycle(page, l
     set_speed(page, lab, "0.05")  # a cycle lasts 20 s
     type_into(page, ".amplitude-input", "0.25")
     cycle = wait_status(lab, lambda s: s["pending"] == {"amplitude": 0.25}, timeout=5)["cycle"]
+    expect(page.locator(".play-button button")).to_have_text("Play", timeout=5000)
     page.click(".play-button button")
     expect(page.locator(".note-amplitude")).to_contain_text("from the next cycle: Amplitude Δσ = 0.25 (in ",
                                                             timeout=10000)
