@@ -47,10 +47,11 @@ class FrameData:
         """A copy of what a frame needs from a live :class:`engine.simulation.Simulation`: the
         disks and the contact rows in use (a fraction of a full snapshot's cost)."""
         p, table = sim.particles, sim.contacts
-        rows = np.flatnonzero(table.status[:table.count] != STATUS_NONE)
+        status = sim.contact_status()
+        rows = np.flatnonzero(status != STATUS_NONE)
         return cls(p.position.copy(), p.radius.copy(), p.angle.copy(),
                    np.column_stack([table.particle_i[rows], table.particle_j[rows]]), table.image[rows],
-                   table.status[rows], table.normal_force[rows], table.tangential_force[rows],
+                   status[rows], table.normal_force[rows], table.tangential_force[rows],
                    table.surface_gap[rows], sim.walls.normal.copy(), sim.walls.offset.copy(),
                    np.where(np.array(sim.periodic), sim.cell.length, 0.0))
 

@@ -27,8 +27,9 @@ from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORM
                            ZETA_R)
 from .params import (CELL_CONTROLS, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite,
                      positive)
-from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, WALL_VELOCITY, CellState, ContactTable,
-                    ParticleState, RunOptions, WallState, Workspace)
+from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, STATUS_SLIDE_NEG,
+                    STATUS_SLIDE_POS, STATUS_STICK, WALL_VELOCITY, CellState, ContactTable, ParticleState, RunOptions,
+                    WallState, Workspace)
 
 NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
 
@@ -638,10 +639,11 @@ class Simulation:
         elastic = np.zeros(count)
         elastic_normal_forces(self.particles.arrays(), table.arrays(), self._law_vector, self.normal_model_code,
                               elastic)
-        rows = np.flatnonzero(table.status[:count] != STATUS_NONE)
+        status = self.contact_status()
+        rows = np.flatnonzero(status != STATUS_NONE)
         return ContactSnapshot(
             i=table.particle_i[rows].astype(np.int64), j=table.particle_j[rows].astype(np.int64),
-            image=table.image[rows].astype(np.int64), status=table.status[rows].copy(),
+            image=table.image[rows].astype(np.int64), status=status[rows],
             normal_force=table.normal_force[rows].copy(), elastic_normal_force=elastic[rows],
             tangential_force=table.tangential_force[rows].copy(),
             surface_gap=table.surface_gap[rows].copy(), tangential_spring=table.tangential_spring[rows].copy(),
@@ -683,7 +685,17 @@ class Simulation:
         lengths = self.box_lengths()
         return (self.cell.virial + np.diag(self.cell.kinetic)) / float(lengths[0] * lengths[1])
 
+    def contact_status(self) -> np.ndarray:
+        """The status of each row of the contact table, as it is read (a copy). Without friction
+        (mu = 0) no contact slides: its Coulomb limit is 0 and F_t = 0, a frictionless contact, not
+        one held at a limit. The kernels mark it sliding, so that its anchors follow the slip
+        (Gilabert Eq. 20)."""
+        status = self.contacts.status[:self.contacts.count].copy()
+        if self.law.friction == 0.0:
+            status[(status == STATUS_SLIDE_POS) | (status == STATUS_SLIDE_NEG)] = STATUS_STICK
+        return status
+
     def status_counts(self) -> dict[str, int]:
         """Number of contacts per status name."""
-        status = self.contacts.status[:self.contacts.count]
+        status = self.contact_status()
         return {name: int(np.count_nonzero(status == code)) for code, name in enumerate(STATUS_NAMES) if code}

@@ -13,7 +13,8 @@ from engine.params import ContactLaw
 from engine.protocols.prepare import gilabert_law, method1
 from engine.protocols.presets import make_preset, preset_settings
 from engine.simulation import Simulation
-from engine.state import CELL_STRAIN_RATE, CELL_STRESS, WALL_FORCE, WALL_VELOCITY, ParticleState
+from engine.state import (CELL_STRAIN_RATE, CELL_STRESS, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, WALL_FORCE, WALL_VELOCITY,
+                          ParticleState)
 
 
 @functools.cache
@@ -37,6 +38,15 @@ def generalized_forces(sim: Simulation, mobile: np.ndarray) -> np.ndarray:
     p = sim.particles
     disks = np.column_stack([p.force, p.torque / p.radius]).ravel()
     return np.concatenate([disks, sim.walls.particle_force[mobile]])
+
+
+def driven_box(friction: float) -> tuple[Simulation, np.ndarray, float]:
+    """The packed box with no inertia left (its disks move only as :func:`impose` says), which
+    walls are mobile, and its largest overlap."""
+    sim = packed_box("cundall-strack", friction=friction)
+    sim.particles.inv_mass[:] = 0.0
+    sim.particles.inv_inertia[:] = 0.0
+    return sim, sim.walls.mode == WALL_FORCE, -sim.snapshot().contacts.surface_gap.min()
 
 
 def impose(sim: Simulation, mobile: np.ndarray, dx: np.ndarray) -> None:
@@ -88,6 +98,30 @@ def test_k_predicts_the_force_change_of_a_small_displacement(model, sliding):
         assert after.sliding.sum() > net.contacts // 2
         wrong = stiffness_matrix(net, np.zeros(net.contacts, dtype=bool))  # as if all stuck
         assert np.linalg.norm(df + wrong @ dx) > 0.1 * np.linalg.norm(df)
+
+
+def test_a_frictionless_contact_is_not_sliding_and_carries_no_tangential_stiffness():
+    """mu = 0: the kernels mark a contact that moves sideways as sliding (its anchors follow the
+    slip), but it is read as non-sliding: it is not held at a limit, F_t = 0 whatever the motion.
+    Its row of k has no tangential stiffness, which k's prediction of the engine's forces checks."""
+    sim, mobile, overlap = driven_box(0.0)
+    n = sim.particles.count
+    turn = np.zeros(3 * n + int(mobile.sum()))
+    turn[2: 3 * n: 3] = 0.02 * overlap
+    impose(sim, mobile, turn)
+    marked = sim.contacts.status[:sim.contacts.count]
+    assert np.count_nonzero((marked == STATUS_SLIDE_POS) | (marked == STATUS_SLIDE_NEG)) > 20
+    counts = sim.status_counts()
+    assert counts["sliding+"] == counts["sliding-"] == 0 and counts["non-sliding"] > 20
+    before = generalized_forces(sim, mobile)
+    net = network(sim.snapshot())
+    assert not net.sliding.any()
+    k = stiffness_matrix(net)
+    assert abs(k - stiffness_matrix(net, np.ones(net.contacts, dtype=bool))).max() < 1e-12 * abs(k).max()
+    dx = np.random.default_rng(3).normal(size=net.dof) * 1e-3 * overlap
+    impose(sim, mobile, dx)
+    df = generalized_forces(sim, mobile) - before
+    assert np.linalg.norm(df + k @ dx) < 1e-2 * np.linalg.norm(df)
 
 
 def test_quadratic_form_is_the_contact_sum_of_eqs_43_to_45():
@@ -179,12 +213,8 @@ def test_frictionless_cohesive_aggregates_have_4_minus_z_n_over_2_floppy_modes()
 def turned_box(turns: int, seed: int) -> Network:
     """The 16-disk box at mu = 0.05 after ``turns`` steps of every disk turning the same way (and a
     random jiggle), so that part of its contacts reached the Coulomb cone."""
-    sim = packed_box("cundall-strack", friction=0.05)
-    mobile = sim.walls.mode == WALL_FORCE
+    sim, mobile, overlap = driven_box(0.05)
     n = sim.particles.count
-    sim.particles.inv_mass[:] = 0.0
-    sim.particles.inv_inertia[:] = 0.0
-    overlap = -sim.snapshot().contacts.surface_gap.min()
     rng = np.random.default_rng(seed)
     for _ in range(turns):
         dx = rng.normal(size=3 * n + 2) * 0.01 * overlap

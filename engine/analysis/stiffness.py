@@ -156,7 +156,8 @@ def network(snapshot, cell_lengths=None) -> Network:
     distant = status == STATUS_COHESIVE
     kn = np.where(distant, -law.cohesion_force / law.cohesion_range if law.cohesion_range > 0 else 0.0,
                   _tangent_normal_stiffness(law, np.maximum(-gap, 0.0), ri, rj, is_wall))
-    kt = np.where(distant, 0.0, law.tangential_stiffness)
+    # a frictionless contact (mu = 0) carries no tangential force whatever the motion
+    kt = np.where(distant | (law.friction == 0.0), 0.0, law.tangential_stiffness)
     kr = np.where(distant, 0.0, law.rolling_stiffness)
     modes = snapshot.wall_modes or ("fixed",) * len(snapshot.wall_normals)
     mobile = np.array([m == "force" for m in modes], dtype=bool)

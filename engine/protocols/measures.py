@@ -90,7 +90,7 @@ def coordination(sim: Simulation) -> float:
 
 def sliding_contacts(sim: Simulation) -> int:
     """Contacts sliding now (on either side of the Coulomb cone)."""
-    status = sim.contacts.status[:sim.contacts.count]
+    status = sim.contact_status()
     return int(np.count_nonzero((status == STATUS_SLIDE_POS) | (status == STATUS_SLIDE_NEG)))
 
 
