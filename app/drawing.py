@@ -21,9 +21,14 @@ FORCE_CLASSES = 5
 """Width classes of the force network: class k holds k/K <= |F|/max|F| < (k+1)/K
 (and the largest force, in class K - 1)."""
 
-MAX_FORCE_THICKNESS = 0.7
+MAX_FORCE_THICKNESS = 0.4
 """Thickness of the strongest class, as a fraction of the mean radius; class k
-is (k + 1)/K of it."""
+is (k + 1)/K of it (a packing of 16 disks, its forces nearly all in the top class, still shows
+most of each disk)."""
+
+WATCHED_THICKNESS = 0.3
+"""Thickness of a watched contact's line, as a fraction of the mean radius: drawn over the force
+network, on a strong force's line it is its coloured core."""
 
 COMPRESSIVE_COLOR = (175, 25, 25)
 TENSILE_COLOR = (30, 90, 220)
@@ -186,6 +191,14 @@ def force_classes(contact_force: np.ndarray, classes: int = FORCE_CLASSES) -> np
 def force_class_thickness(klass: int, mean_radius: float) -> float:
     """World thickness of force class k: (k + 1)/K x MAX_FORCE_THICKNESS x mean radius."""
     return (klass + 1) / FORCE_CLASSES * MAX_FORCE_THICKNESS * mean_radius
+
+
+def frame_caption(sim_time: float, step: int, phase: str = "") -> str:
+    """The caption of a picture at simulated time ``sim_time`` (four significant digits, never an
+    exponent) and step ``step``, under the protocol's ``phase`` if there is one:
+    ``cycle 12 · q = 0.312, rising`` then ``t = 12.5, step 16250`` on a line of its own."""
+    digits = np.format_float_positional(sim_time, precision=4, unique=True, fractional=False, trim="-")
+    return (f"{phase}\n" if phase else "") + f"t = {digits}, step {step}"
 
 
 def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:

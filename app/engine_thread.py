@@ -42,7 +42,7 @@ from engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSetting
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
-from .drawing import COLOR_FIELDS, SceneFrame
+from .drawing import COLOR_FIELDS, SceneFrame, frame_caption
 from .frames import FrameData, build_frame
 from .jobs import JobOutcome, Jobs
 from .replay import Replay, read_replay, read_time_limit, write_lab_movie, write_run
@@ -509,11 +509,11 @@ class LabEngine:
                 self._frame_ready.set()
 
     def _remember(self) -> None:
-        """Keep a frame of the running preset (its first view) with the settings in effect
+        """Keep a frame of the running preset (its first view) with the settings in effect and its phase
         (called by the preset at its frame times), within ``history_limit`` bytes (and at least
         the last two frames)."""
         snap = self.source.views()[0].sim.snapshot()
-        self._history.append((snap, settings_json(self.source.settings)))
+        self._history.append((snap, settings_json(self.source.settings), self.source.phase()))
         self._history_bytes += snap.nbytes
         while len(self._history) > 2 and self._history_bytes > self.history_limit:
             self._history_bytes -= self._history.popleft()[0].nbytes
@@ -526,7 +526,7 @@ class LabEngine:
         sim = preset.views()[0].sim
         frames = list(self._history)
         if frames[-1][0].step != sim.step:
-            frames.append((sim.snapshot(), settings_json(preset.settings)))
+            frames.append((sim.snapshot(), settings_json(preset.settings), preset.phase()))
         names = (sim.particles.count, sim.walls.names)
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
                     "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time(),
@@ -559,13 +559,16 @@ class LabEngine:
         if not seconds > 0:
             raise ParameterError("record seconds", seconds, "a length of simulated time > 0")
         now = preset.sim.time
-        frames = [(FrameData.from_snapshot(snap), f"t = {snap.time:.4g}, step {snap.step}")
-                  for snap, _ in self._history if snap.time >= now - seconds]
+        frames = [(FrameData.from_snapshot(snap), frame_caption(snap.time, snap.step, phase))
+                  for snap, _, phase in self._history if snap.time >= now - seconds]
         if len(frames) < 2:
             raise ParameterError("record seconds", seconds,
                                  f"a span holding at least 2 kept frames (frames are kept every "
                                  f"{preset.cycle_time() / preset.settings.frames_per_cycle:.3g} of simulated time)")
-        self.jobs.start("record", f"recording {path.name}", write_lab_movie, (path, frames, color))
+        sim = preset.views()[0].sim
+        watched = preset.watched()
+        labels = [pair_label(pair, sim.particles.count, sim.walls.names) for pair in watched]
+        self.jobs.start("record", f"recording {path.name}", write_lab_movie, (path, frames, color, watched, labels))
         self._info(f"recording {len(frames)} frames to {path.name}…", "record")
 
     def _job_done(self, outcome: JobOutcome) -> None:

@@ -36,8 +36,9 @@ from engine.io import h5md
 from engine.io.outputs import check_output
 
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, PRESSURE_LUT,
-                      ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, SceneFrame, cell_outline,
-                      disk_colors, force_class_thickness, force_classes, frame_bounds)
+                      ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS,
+                      SceneFrame, cell_outline, disk_colors, force_class_thickness, force_classes, frame_bounds,
+                      frame_caption)
 from .frames import FrameData, build_frame
 
 SUFFIXES = (".png", ".gif", ".mp4")
@@ -61,7 +62,7 @@ CELL_WIDTH = 0.12
 DISK_EDGE_WIDTH = 0.04
 """Line widths as fractions of the mean radius (drawn at least MIN_LINE_PX wide)."""
 
-FORCE_BORDER = 0.2
+FORCE_BORDER = 0.12
 """A force line has a white border this fraction of its width on each side: compressive red on
 a red disk (θ near 0) would otherwise not show."""
 
@@ -81,9 +82,13 @@ BOLD_WIDTH = 1.15
 """Width of an average character of the legend font, in em, and how much wider bold is (to size
 the legend before drawing; DejaVu Sans digits are 0.64 em, lower-case letters about 0.5)."""
 
-CAPTION_CHARS = 26
-"""The legend is sized for a caption of at least this many characters, so that captions of a
-movie (``t = 1234.5, step 1234567`` is 24) do not move the packing from frame to frame."""
+CAPTION_CHARS = 30
+"""The legend is sized for caption lines of at least this many characters, so that the captions
+of a movie (``t = 1234.5, step 1234567`` is 24, ``cycle 123 · q = 0.312, falling`` 30) do not
+move the packing from frame to frame."""
+
+WATCHED_ROWS = 8
+"""The legend names at most this many watched contacts (one per colour), then says how many more."""
 
 LEGEND_LINE = 0.3
 """Width of the line samples of the legend, in em (the cell's: half of it)."""
@@ -184,13 +189,6 @@ def select_frames(spec, count: int, name: str = "frames") -> list[int]:
     if not indices:
         raise ParameterError(name, text, f"a range selecting at least one of the file's frames 0..{last}")
     return indices
-
-
-def frame_caption(sim_time: float, step: int) -> str:
-    """The caption of a frame at simulated time ``sim_time`` (four significant digits, never an
-    exponent) and step ``step``: ``t = 12.5, step 16250``."""
-    digits = np.format_float_positional(sim_time, precision=4, unique=True, fractional=False, trim="-")
-    return f"t = {digits}, step {step}"
 
 
 def _walls_cut_at_corners(frame: SceneFrame) -> SceneFrame:
@@ -343,14 +341,36 @@ def _color_block(color_field: str) -> list[_Row]:
     return rows + [_spoke_row()]
 
 
-def _legend_blocks(frame: SceneFrame, color_field: str, forces: bool, caption: str) -> list[list[_Row]]:
-    """Caption, disk colours, contact kinds (with ``forces``), and the walls or cell the frame has."""
-    blocks = [[_text_row(caption, size=1.15, bold=True, chars=CAPTION_CHARS)]] if caption else []
+def _caption_block(caption: str) -> list[_Row]:
+    """The caption's lines: the first large and bold (the protocol's phase, or the time), the
+    others plain."""
+    lines = caption.split("\n")
+    return ([_text_row(lines[0], size=1.15, bold=True, chars=CAPTION_CHARS)]
+            + [_text_row(line, chars=CAPTION_CHARS) for line in lines[1:]])
+
+
+def _watched_block(labels: Sequence[str]) -> list[_Row]:
+    """The watched contacts in their colours (as in the lab's Coulomb-cone plot)."""
+    rows = [_text_row("watched contacts", bold=True)]
+    rows += [_line_row(WATCHED_COLORS[k % len(WATCHED_COLORS)], 1.5 * LEGEND_LINE, label)
+             for k, label in enumerate(labels[:WATCHED_ROWS])]
+    if len(labels) > WATCHED_ROWS:
+        rows.append(_text_row(f"and {len(labels) - WATCHED_ROWS} more"))
+    return rows
+
+
+def _legend_blocks(frame: SceneFrame, color_field: str, forces: bool, caption: str,
+                   watched_labels: Sequence[str]) -> list[list[_Row]]:
+    """Caption, disk colours, contact kinds (with ``forces``), watched contacts, and the walls or
+    cell the frame has."""
+    blocks = [_caption_block(caption)] if caption else []
     blocks.append(_color_block(color_field))
     if forces:
         blocks.append([_text_row("contact forces", bold=True)]
                       + [_line_row(color, LEGEND_LINE, name) for name, color in CONTACT_KINDS]
                       + [_width_row()])
+    if len(watched_labels):
+        blocks.append(_watched_block(watched_labels))
     outline = []
     if len(frame.walls):
         outline.append(_line_row(WALL_COLOR, LEGEND_LINE, "wall"))
@@ -442,9 +462,9 @@ def _add_segments(ax: Axes, segments: np.ndarray, color, width_px: float, zorder
 
 
 def _draw_packing(ax: Axes, frame: SceneFrame, color_field: str, forces: bool, scale: float) -> None:
-    """Disks, forces, spokes, walls and cell on ``ax`` (its limits set, ``scale`` pixels per length),
-    lines as wide as the lab scene's (true size, fractions of the mean radius) but at least
-    MIN_LINE_PX (walls 2 px)."""
+    """Disks, forces, watched contacts, spokes, walls and cell on ``ax`` (its limits set, ``scale``
+    pixels per length), lines as wide as the lab scene's (true size, fractions of the mean radius)
+    but at least MIN_LINE_PX (walls and watched contacts 2 px)."""
     radii = frame.radii
     mean_radius = float(radii.mean()) if len(radii) else 1.0
     width = mean_radius * scale  # pixels per mean radius
@@ -464,6 +484,11 @@ def _draw_packing(ax: Axes, frame: SceneFrame, color_field: str, forces: bool, s
         for k in range(FORCE_CLASSES):  # the strongest drawn last, on top
             for code, (_, color) in enumerate(CONTACT_KINDS):
                 _add_segments(ax, frame.contacts[(klass == k) & (kind == code)], color, lines[k], 2)
+    watched_width = max(2.0, WATCHED_THICKNESS * width)
+    _add_segments(ax, frame.watched, (255, 255, 255), watched_width + 2.0, 3)
+    for code in np.unique(frame.watched_index % len(WATCHED_COLORS)):
+        _add_segments(ax, frame.watched[frame.watched_index % len(WATCHED_COLORS) == code], WATCHED_COLORS[code],
+                      watched_width, 3)
     tips = frame.positions + radii[:, None] * np.column_stack([np.cos(frame.angles), np.sin(frame.angles)])
     _add_segments(ax, np.stack([frame.positions, tips], axis=1), SPOKE_COLOR,
                   max(MIN_LINE_PX, SPOKE_WIDTH * width), 3)
@@ -491,11 +516,14 @@ def _draw_legend(ax: Axes, layout: _Layout, blocks: list[list[_Row]]) -> None:
 
 
 def render_image(frame: SceneFrame, size=(1280, 720), color_field: str = "rotation", forces: bool = True,
-                 caption: str = "", bounds: tuple[float, float, float, float] | None = None) -> np.ndarray:
+                 caption: str = "", bounds: tuple[float, float, float, float] | None = None,
+                 watched_labels: Sequence[str] = ()) -> np.ndarray:
     """The picture of ``frame``: (H, W, 3) uint8 RGB for ``size`` = (W, H) pixels.
 
     ``color_field`` is one of :data:`app.drawing.COLOR_FIELDS`; ``forces`` draws the force
-    network; ``caption`` is written above the legend; ``bounds`` (xmin, xmax, ymin, ymax, in
+    network; ``caption`` is written above the legend (its first line in bold); the frame's
+    watched contacts are named in the legend by ``watched_labels`` (in the order of the watch
+    list: the k-th in the k-th colour); ``bounds`` (xmin, xmax, ymin, ymax, in
     lengths) is the region shown (default :func:`app.drawing.frame_bounds` of the frame; a movie
     passes the union over its frames so the packing stays put).
     """
@@ -505,7 +533,7 @@ def render_image(frame: SceneFrame, size=(1280, 720), color_field: str = "rotati
     bounds = frame_bounds(frame) if bounds is None else bounds
     fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, facecolor="white")
     canvas = FigureCanvasAgg(fig)
-    blocks = _legend_blocks(frame, color_field, forces, caption)
+    blocks = _legend_blocks(frame, color_field, forces, caption, watched_labels)
     layout = _layout(size, bounds, blocks)
     packing = _axes(fig, layout.packing, size)
     packing.set_xlim(*layout.limits[:2])
@@ -523,7 +551,7 @@ def png_name(out: Path, number: int) -> Path:
 
 def write_movie(frames: Iterable[tuple[SceneFrame, str]], out: Path, size=(1280, 720), color_field: str = "rotation",
                 forces: bool = True, fps: float = 10.0, bounds: tuple[float, float, float, float] | None = None,
-                numbers: Iterable[int] | None = None) -> int:
+                numbers: Iterable[int] | None = None, watched_labels: Sequence[str] = ()) -> int:
     """Render (frame, caption) pairs into ``out`` and return how many frames were written.
 
     By the suffix of ``out``: ``.gif`` an animated GIF looping for ever (assembled in memory,
@@ -533,7 +561,7 @@ def write_movie(frames: Iterable[tuple[SceneFrame, str]], out: Path, size=(1280,
     ``out``, named ``STEM_00012.png`` by ``numbers`` (default 0, 1, 2, ...; :func:`render_run`
     passes the frames' indices in the run file), ``out`` itself then not written.
     ``bounds`` is the region shown in every frame; by default the union of the frames' bounds,
-    for which the frames are first all read into memory.
+    for which the frames are first all read into memory. ``watched_labels``: see :func:`render_image`.
     """
     out = Path(out)
     suffix = check_out(out)
@@ -548,7 +576,8 @@ def write_movie(frames: Iterable[tuple[SceneFrame, str]], out: Path, size=(1280,
     if bounds is None:
         frames = list(frames)
         bounds = union_bounds(frame for frame, _ in frames)
-    images = (render_image(frame, size, color_field, forces, caption, bounds) for frame, caption in frames)
+    images = (render_image(frame, size, color_field, forces, caption, bounds, watched_labels)
+              for frame, caption in frames)
     if suffix == ".gif":
         return _write_gif(images, out, fps)
     if suffix == ".mp4":
@@ -598,14 +627,20 @@ def _write_mp4(images: Iterator[np.ndarray], out: Path, size: tuple[int, int], f
     return count
 
 
+def _protocol(f) -> dict:
+    return json.loads(h5md.parameters(f).get("protocol_json", "{}") or "{}")
+
+
 def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
-    """(SceneFrame, caption) of each frame ``indices`` of an open GranLab run file ``f``."""
+    """(SceneFrame, caption) of each frame ``indices`` of an open GranLab run file ``f``, with
+    the contacts the lab watched (a lab run's) and the phase of its protocol in the caption."""
     walls = h5md.walls_from_json(h5md.parameters(f)["walls_json"])
     normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
+    watched = [tuple(pair) for pair in _protocol(f).get("watched", [])]
     for index in indices:
         raw = h5md.read_frame(f, index)
-        yield build_frame([(FrameData.from_run_frame(raw, normals), (0.0, 0.0))]), frame_caption(raw["time"],
-                                                                                                  raw["step"])
+        yield (build_frame([(FrameData.from_run_frame(raw, normals), (0.0, 0.0))], [watched]),
+               frame_caption(raw["time"], raw["step"], raw.get("lab_phase", "")))
 
 
 MOVIE_CYCLES = 10
@@ -618,7 +653,7 @@ def default_movie_frames(f, count: int) -> list[int]:
     """The frames of a movie made without ``--frames``: those of the last MOVIE_CYCLES cycles
     (the lab's ``cycle_time`` or a study's ``period`` in the file's protocol), else the last
     MOVIE_FRAMES."""
-    protocol = json.loads(h5md.parameters(f).get("protocol_json", "{}") or "{}")
+    protocol = _protocol(f)
     cycle = protocol.get("cycle_time") or protocol.get("period")
     if isinstance(cycle, (int, float)) and cycle > 0:
         times = f["particles/all/position/time"][:count]
@@ -670,7 +705,8 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
         frames_read = run_frames(f, indices)
         if progress is not None:
             frames_read = _reporting(frames_read, len(indices), progress)
-        written = write_movie(frames_read, out, size, color_field, forces, fps, bounds, indices)
+        written = write_movie(frames_read, out, size, color_field, forces, fps, bounds, indices,
+                              _protocol(f).get("watched_labels", []))
     return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,
             "indices": [indices[0], indices[-1]], "size": list(size), "color": color_field, "forces": forces,
             "fps": fps, "seconds_per_frame": (time.perf_counter() - start) / written}

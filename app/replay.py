@@ -218,14 +218,14 @@ def _packing_frame(index: int, state: PackingState) -> dict:
 
 def write_run(report, path: Path, sim, frames: list, protocol: dict, series: dict, rows: dict, cycles: list) -> str:
     """Write a lab run file to ``path`` (the job of "Save run"): ``sim`` (a copy of the simulation:
-    its parameters and its checkpoint), ``frames`` (snapshot, settings JSON) pairs, the lab's
+    its parameters and its checkpoint), ``frames`` (snapshot, settings JSON, phase) triples, the lab's
     ``series`` (name -> columns) with their ``rows``, and the ``cycles`` records of ``granlab
     info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was written, for the user."""
     partial = partial_file(path)
     try:
         with h5md.RunWriter(partial, sim, protocol=protocol, lab_series=series, overwrite=True) as writer:
-            for k, (snap, settings) in enumerate(frames):
-                writer.write_frame(snap, settings)
+            for k, (snap, settings, phase) in enumerate(frames):
+                writer.write_frame(snap, settings, phase)
                 report(0.95 * (k + 1) / len(frames))
             for name, values in rows.items():
                 writer.write_series(name, values)
@@ -238,11 +238,12 @@ def write_run(report, path: Path, sim, frames: list, protocol: dict, series: dic
     return f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) to {path.name}"
 
 
-def write_lab_movie(report, path: Path, frames: list, color: str) -> str:
-    """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie")."""
+def write_lab_movie(report, path: Path, frames: list, color: str, watched: list, labels: list[str]) -> str:
+    """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
+    the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend."""
     from .render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
 
-    scenes = [(build_frame([(data, (0.0, 0.0))]), caption) for data, caption in frames]
+    scenes = [(build_frame([(data, (0.0, 0.0))], [watched]), caption) for data, caption in frames]
     bounds = union_bounds(scene for scene, _ in scenes)
 
     def rendered():
@@ -252,7 +253,7 @@ def write_lab_movie(report, path: Path, frames: list, color: str) -> str:
 
     partial = partial_file(path)
     try:
-        count = write_movie(rendered(), partial, color_field=color, bounds=bounds)
+        count = write_movie(rendered(), partial, color_field=color, bounds=bounds, watched_labels=labels)
         partial.replace(path)
     finally:
         partial.unlink(missing_ok=True)

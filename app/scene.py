@@ -38,8 +38,8 @@ import viser
 import websockets.asyncio.server
 from websockets.http11 import Request
 
-from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR,
-                      PALETTES, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, SceneFrame, cell_outline, color_index,
+from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR, PALETTES, SPOKE_COLOR,
+                      WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, SceneFrame, cell_outline, color_index,
                       force_class_thickness, force_classes, frame_bounds)
 
 DISK_SEGMENTS = 16
@@ -50,7 +50,6 @@ DISK_HEIGHT = 0.2
 """Cylinder height as a fraction of the frame's mean radius."""
 
 SPOKE_THICKNESS = 0.08
-WATCHED_THICKNESS = 0.45
 WALL_THICKNESS = 0.2
 CELL_THICKNESS = 0.1
 MECHANISM_THICKNESS = 0.25

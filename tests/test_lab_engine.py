@@ -352,7 +352,7 @@ def test_the_frames_kept_for_a_save_hold_to_their_memory_limit(tmp_path):
     try:
         wait(lambda: lab.status()["history_frames"] > 3 and lab.status()["step"] > 20000)
         frames = list(lab._history)
-        held = sum(snap.nbytes for snap, _ in frames)
+        held = sum(snap.nbytes for snap, _, _ in frames)
         assert held <= 0.05 * 2 ** 20 and held + frames[0][0].nbytes > 0.05 * 2 ** 20 * 0.9
         assert lab.status()["history_mib"] == pytest.approx(held / 2 ** 20)
     finally:

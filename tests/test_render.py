@@ -11,7 +11,7 @@ import pytest
 
 from app.cli import main
 from app.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
-                         disk_colors)
+                         WATCHED_COLORS, SceneFrame, disk_colors)
 from app.render import default_movie_frames, render_image, run_frames, write_movie
 from engine.io import h5md
 from engine.io.scene import parse_scene
@@ -195,6 +195,42 @@ def test_periodic_cell_is_outlined(cell, tmp_path):
     assert _count(image, WALL_COLOR) < 100  # dark text edges; a wall would be thousands
 
 
+def test_a_lab_runs_movie_shows_its_watched_contacts_and_its_phase(pile, tmp_path):
+    """A lab run names its watched contacts and the phase of each frame: the picture draws each
+    watched contact in its colour (packing and legend) and the caption names the phase."""
+    sim = parse_scene(PILE).build()
+    sim.run(2000)
+    snap = sim.contact_snapshot()
+    watched = [(int(i), int(j)) for i, j in zip(snap.i, snap.j) if j < sim.particles.count][:2]
+    path = tmp_path / "lab.h5"
+    protocol = {"watched": [list(p) for p in watched], "watched_labels": [f"{i}–{j}" for i, j in watched]}
+    with h5md.RunWriter(path, sim, protocol=protocol, lab_series={}) as writer:
+        writer.write_frame(sim, "{}", "cycle 3 · q = 0.100, rising")
+    frame, caption = _frame(path, 0)
+    assert caption.splitlines()[0] == "cycle 3 · q = 0.100, rising" and caption.splitlines()[1].startswith("t = ")
+    assert frame.watched.shape == (2, 2, 2)
+    out = tmp_path / "lab.png"
+    assert _render(path, "--out", out) == 0
+    image = iio.imread(out)
+    packing, legend = image[:, :640], image[:, 640:]
+    for color in WATCHED_COLORS[:2]:
+        assert _count(packing, color) > 100 and _count(legend, color) > 100
+    assert _count(image, WATCHED_COLORS[2]) == 0
+
+
+def test_disks_show_through_a_force_network_of_equal_forces(tmp_path):
+    """16 disks in a square, every force equal (all in the top class, as in a small box under
+    load): more than half of each disk still shows its colour."""
+    centres = np.array([(2.0 * x, 2.0 * y) for y in range(4) for x in range(4)])
+    pairs = [(k, k + 1) for k in range(16) if k % 4 < 3] + [(k, k + 4) for k in range(12)]
+    frame = SceneFrame(positions=centres, radii=np.ones(16), angles=np.zeros(16), coordination=np.zeros(16, int),
+                       pressure=np.zeros(16), sliding=np.zeros(16, bool),
+                       contacts=np.array([[centres[i], centres[j]] for i, j in pairs]), contact_force=np.ones(24),
+                       contact_kind=np.zeros(24, np.int8), walls=np.zeros((0, 2, 2)), cell=None,
+                       watched=np.zeros((0, 2, 2)))
+    disk = ROTATION_LUT[0]
+    bare = _count(render_image(frame, forces=False), disk)
+    assert _count(render_image(frame), disk) > 0.5 * bare
 def test_write_movie_takes_frames_in_memory(pile, tmp_path):
     """The lab's recorder: (SceneFrame, caption) pairs straight to a GIF."""
     frames = [_frame(pile, k) for k in range(FRAMES)]

@@ -51,6 +51,7 @@ PARTICLE_ELEMENTS = (("position", (2,)), ("velocity", (2,)), ("angle", ()), ("om
 FRAME_OBSERVABLES = (("wall_position", "observables/walls/position"), ("wall_force", "observables/walls/force"),
                      ("wall_mode", "observables/walls/mode"), ("stress", "observables/stress"),
                      ("law_json", "observables/law"), ("lab_settings_json", "observables/lab/settings"),
+                     ("lab_phase", "observables/lab/phase"),
                      ("cell_control", "observables/cell/control"),
                      ("cell_target_stress", "observables/cell/target_stress"))
 """Per-frame observables that :func:`read_frame` returns with the particles (key, path)."""
@@ -210,6 +211,7 @@ class RunWriter:
         if lab_series is not None:
             lab = observables.create_group("lab")
             time_dependent(lab, "settings", (), h5py.string_dtype())
+            time_dependent(lab, "phase", (), h5py.string_dtype())
             for name, columns in lab_series.items():
                 _extendable(lab, name, (len(columns),), np.float64, 1024).attrs["columns"] = \
                     np.array(columns, dtype="S32")
@@ -264,10 +266,11 @@ class RunWriter:
         append_row(self._get(f"{path}/time"), time)
         append_row(self._get(f"{path}/step"), step)
 
-    def write_frame(self, state, settings: str | None = None) -> None:
+    def write_frame(self, state, settings: str | None = None, phase: str | None = None) -> None:
         """Append a frame (positions, contacts, observables) from a :class:`Simulation` or a
         :class:`Snapshot` taken earlier, and the cycle records waiting in memory; flush.
-        ``settings``: the lab's settings at that frame (JSON), for a lab run."""
+        ``settings``: the lab's settings at that frame (JSON), ``phase``: where its protocol was
+        (``cycle 12 · q = 0.312, rising``), for a lab run."""
         self._write_cycles()
         snap = state.snapshot() if isinstance(state, Simulation) else state
         step, time = snap.step, snap.time
@@ -301,6 +304,8 @@ class RunWriter:
         self._element("observables/law", step, time, to_json(snap.law))
         if settings is not None:
             self._element("observables/lab/settings", step, time, settings)
+        if phase is not None:
+            self._element("observables/lab/phase", step, time, phase)
         self.file.flush()
 
     def write_cycle(self, cycle: int, sim: Simulation, length_x: float, length_y: float) -> None:

@@ -388,6 +388,10 @@ class Preset(ABC):
                 "cycle_time": self.cycle_time(), "window": self.window_cycles * self.cycle_time(),
                 "readout": self.readout()}
 
+    def phase(self) -> str:
+        """Where the protocol is, in a few words, for a movie's caption: its stage by default."""
+        return self.stage
+
     def readout(self) -> dict:
         """Figures for the lab's readout strip (those that mean something for the preset): solid
         fraction, coordination, sliding contacts."""
@@ -644,6 +648,15 @@ class RatchetPreset(Preset):
     def _strain_fit(self) -> dict | None:
         return strain_fit(self._cycle_gamma, self.fit_from, self.verdict)
 
+    def phase(self) -> str:
+        """``compressing to P0 = 1``, then ``cycle 12 · q = 0.312, rising`` (q rises over the first
+        half of each cycle and falls back over the second)."""
+        if self.stage != "cycling":
+            return f"{self.stage} to P0 = {self.settings.pressure:g}"
+        elapsed = self._sim.time - self._start
+        rising = elapsed % self.load.period < 0.5 * self.load.period
+        return f"cycle {self._cycle} · q = {self.load.q(elapsed):.3f}, {'rising' if rising else 'falling'}"
+
 
 def strain_fit(cycle_gamma, reference_cycle: int, verdict=None) -> dict | None:
     """The strain per cycle fitted from ``reference_cycle`` on, given (cycle, γ) pairs (None
@@ -760,6 +773,11 @@ class ClosedPathPreset(Preset):
     def readout(self) -> dict:
         return {"loops": self._k // (4 * self.steps_per_side)}
 
+    def phase(self) -> str:
+        """``loop 3 · B → C``: the loop and the side of the path A → B → C → D → A being drawn."""
+        side = (self._k // self.steps_per_side) % 4
+        return f"loop {self._k // (4 * self.steps_per_side)} · {'ABCD'[side]} → {'ABCD'[(side + 1) % 4]}"
+
 
 # ---------------------------------------------------------------------------------------------- block
 class BlockPreset(Preset):
@@ -813,6 +831,11 @@ class BlockPreset(Preset):
     def _load_ratio(self) -> float:
         phase = (self._sim.time % self.settings.period) / self.settings.period
         return 1.5 * (2.0 * phase if phase < 0.5 else 2.0 - 2.0 * phase)
+
+    def phase(self) -> str:
+        """``load 0.75 μF_n, rising``: the sideways load rises over the first half of the period."""
+        rising = self._sim.time % self.settings.period < 0.5 * self.settings.period
+        return f"load {self._load_ratio():.2f} μF_n, {'rising' if rising else 'falling'}"
 
     def sample(self) -> None:
         """The block's series is a path, sampled at the path cadence (:meth:`sample_paths`)."""
