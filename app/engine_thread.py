@@ -50,9 +50,12 @@ from .replay import Replay, read_replay, read_time_limit, write_lab_movie, write
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_MIB = 64.0
 CHUNK_SECONDS = 0.02
-SERIES_CAPACITY = {"contacts": 60000, "time": 40000, "block": 40000, "springs": 40000, "cycles": 100000,
-                   "replay": 100000}
-"""Rows each series keeps (a tab that falls further behind gets the newest ones)."""
+SERIES_CAPACITY = {"contacts": 1_000_000, "time": 400_000, "block": 400_000, "springs": 400_000, "cycles": 100_000,
+                   "replay": 100_000}
+"""Rows each series keeps (a tab that falls further behind gets the newest ones), and so a save
+holds: the watched paths of ratchet16 (320 samples of 6 contacts a cycle) for its last 520 cycles,
+so that a replay draws the cone plot at the frames of those (ratchet16 keeps the frames of 1350
+cycles, ratchet those of 90). A buffer's memory is taken as rows come (at most 48 MB for the paths)."""
 MOVIE_SUFFIXES = (".gif", ".mp4")
 REPLAY_SUFFIXES = (".h5", ".h5md", ".dump", ".xyz")
 

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import time
 from pathlib import Path
 
@@ -231,6 +232,8 @@ def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
     assert frames >= 10 * 3  # ten frames a cycle, compression included
     assert json.loads(first["lab_settings_json"])["amplitude"] == 0.2
     assert json.loads(last["lab_settings_json"])["amplitude"] == 0.25
+    assert first["lab_phase"] == "compressing to P0 = 1"  # what a movie's caption says of each frame
+    assert re.fullmatch(r"cycle [3-9] · q = 0\.\d{3}, (rising|falling)", last["lab_phase"])
     assert set(series) == {"time", "cycles", "contacts"} and series["time"][0] == engine.source.series["time"]
     info = h5md.summary(tmp_path / "lab-run.h5")
     assert info["cycles"] == len(series["cycles"][1]) >= 4 and info["protocol"]["lab_preset"] == "ratchet16"
