@@ -125,6 +125,11 @@ class Dashboard:
                               margin=(12, 4, 5, 4))
         self.speed = W.DiscreteSlider(name="Speed", options=SPEEDS, value=1.0, css_classes=["speed-slider"],
                                       width=230, margin=(2, 12, 5, 12))
+        # a viewer is shown the speed as text: panel draws a disabled DiscreteSlider with its handle
+        # at the far end, whatever its value
+        self.speed_text = pn.pane.HTML("", css_classes=["speed-text"], width=230, margin=(14, 12, 5, 12),
+                                       visible=self.viewer)
+        self.speed.visible = not self.viewer
         self.phase = W.FloatSlider(name="Loading phase φ (°)", start=-180, end=180, step=5, value=0.0,
                                    css_classes=["phase-slider"], **wide)
         self.amplitude = W.FloatInput(name="Amplitude Δσ", value=0.2, step=0.05, css_classes=["amplitude-input"], **wide)
@@ -322,6 +327,8 @@ class Dashboard:
             "3D scene; <i>rigidity</i>: Gilabert's counts; <i>packing</i>: Φ, z, forces, with the (N, T) scatter; "
             "<i>fractal</i>: I(k) and its fit.</p>", css_classes=["analysis-summary"], sizing_mode="stretch_width")
         self.analysis_plots = AnalysisFigures()
+        for fig in self.analysis_plots.figures.values():
+            fig.visible = False  # a hidden pane alone still draws its figure's empty frame
         self.analysis_figures = {name: pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=320, visible=False)
                                  for name, fig in self.analysis_plots.figures.items()}
         # the pictures first: on a 768-pixel screen the table below them scrolls
@@ -434,6 +441,8 @@ class Dashboard:
             self._note("run", "error", status.get("error", ""))
         unit = status.get("clock_unit", "")
         self.speed.name = f"Speed ({unit} per second)" if unit else "Speed"
+        self.speed_text.object = (f"<div style='font-size:14px'>{escape(self.speed.name)}: "
+                                  f"<b>{_speed_label(self.speed.value)}</b></div>")
         self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
         readout = status.get("readout") or {}
         fit = status.get("strain") or {}
@@ -568,7 +577,7 @@ class Dashboard:
         if self.viewer:
             files.visible = False
             self.fit_now.visible = False
-            for widget in (self.preset, self.play, self.step, self.reset, self.speed, self.apply_reset, self.color,
+            for widget in (self.preset, self.play, self.step, self.reset, self.apply_reset, self.color,
                            self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
                 widget.disabled = True
         sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, width=250,
@@ -577,7 +586,7 @@ class Dashboard:
                  "runs it</div>" if self.viewer else "GranLab")
         header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
                                      width=105 + 95 * self.viewer),
-                        self.preset, self.play, self.step, self.reset, self.speed,
+                        self.preset, self.play, self.step, self.reset, self.speed, self.speed_text,
                         pn.Column(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"),
                                   sizing_mode="stretch_width", margin=(6, 0, 0, 0)),
                         height=HEADER_HEIGHT, sizing_mode="stretch_width", styles={"overflow": "hidden"})

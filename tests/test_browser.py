@@ -521,6 +521,9 @@ def test_analysis_tab_shows_the_force_network_and_only_the_figures_the_analysis_
     open_dashboard(page, lab, "ratchet16")
     before = wait_status(lab, lambda s: s["stage"] == "cycling")["analysis_seq"]  # compressed: the disks touch
     page.locator(".pane-choice button", has_text="Analysis").click()
+    # no empty frame before an analysis has run
+    expect(page.locator(".analysis-button button")).to_be_visible()
+    assert model(page, "figure-analysis-network", "m.visible") is (before > 0)
     page.select_option(".analysis-select select", value="status")
     page.click(".analysis-button button")
     s = wait_status(lab, lambda s: s["analysis_seq"] > before, timeout=60)
@@ -609,6 +612,9 @@ def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, t
                     ".amplitude-input input", ".watch-button button"):
         expect(viewer.locator(control)).to_be_disabled()
     expect(viewer.locator(".save-button button")).to_be_hidden()
+    # the speed in effect as text (ratchet16 runs at 0.5 cycles a second), no slider to reach for
+    expect(viewer.locator(".speed-text")).to_have_text("Speed (load cycles per second): 0.5")
+    expect(viewer.locator(".speed-slider").first).to_be_hidden()
     expect(viewer.locator(".load-button button")).to_be_hidden()
     # a page that enables its own Pause button and presses it: the server ignores a viewer's commands
     viewer.evaluate("() => { for (const m of Bokeh.documents[0].all_models)"
