@@ -123,6 +123,7 @@ class SceneFrame:
     watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
     watched_index: np.ndarray | None = None  # (K,) int: position of each watched segment's pair in
     #                                           the watch list (its colour); None: 0, 1, 2, ...
+    labels: tuple[tuple[str, float, float], ...] = ()  # (text, x, y): a name whose top centre is at (x, y)
 
     def __post_init__(self) -> None:
         sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
@@ -201,12 +202,24 @@ def frame_caption(sim_time: float, step: int, phase: str = "") -> str:
     return (f"{phase}\n" if phase else "") + f"t = {digits}, step {step}"
 
 
+LABEL_SIZE = 0.45
+LABEL_HEIGHT = 1.5
+"""A label under disks (the closed path's pairs) is written LABEL_SIZE mean radii high and takes
+LABEL_HEIGHT of them under the disks; a character is about 0.6 of its height wide."""
+
+
 def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:
-    """(xmin, xmax, ymin, ymax) of the disks, walls and cell outline."""
+    """(xmin, xmax, ymin, ymax) of the disks, walls, cell outline and labels."""
     xs = [frame.positions[:, 0] - frame.radii, frame.positions[:, 0] + frame.radii,
           frame.walls[:, :, 0].ravel()]
     ys = [frame.positions[:, 1] - frame.radii, frame.positions[:, 1] + frame.radii,
           frame.walls[:, :, 1].ravel()]
+    if frame.labels:
+        mean_radius = float(frame.radii.mean())
+        half = np.array([0.3 * LABEL_SIZE * mean_radius * len(text) for text, _, _ in frame.labels])
+        x = np.array([x for _, x, _ in frame.labels])
+        xs += [x - half, x + half]
+        ys.append(np.array([y - LABEL_HEIGHT * mean_radius for _, _, y in frame.labels]))
     if frame.cell is not None:
         xs.append(np.array([0.0, frame.cell[0]]))
         ys.append(np.array([0.0, frame.cell[1]]))

@@ -472,13 +472,13 @@ class LabEngine:
         source = self.source
         if isinstance(source, Replay):
             if frame:
-                parts = ([(source.data(), (0.0, 0.0))], [source.watched])
+                parts = ([(source.data(), (0.0, 0.0))], [source.watched], source.groups)
             status = source.status()
         else:
             views = source.views()
             if frame:
                 parts = ([(FrameData.from_simulation(v.sim), v.offset) for v in views],
-                         [source.watched()] + [[] for _ in views[1:]])
+                         [source.watched()] + [[] for _ in views[1:]], _groups(views))
             sim = views[0].sim
             status = source.status()
             status.update(time=sim.time, step=sim.step, particles=sum(v.sim.particles.count for v in views),
@@ -512,10 +512,10 @@ class LabEngine:
                 self._frame_ready.set()
 
     def _remember(self) -> None:
-        """Keep a frame of the running preset (its first view) with the settings in effect and its phase
+        """Keep a frame of the running preset (all its views) with the settings in effect and its phase
         (called by the preset at its frame times), within ``history_limit`` bytes (and at least
         the last two frames)."""
-        snap = self.source.views()[0].sim.snapshot()
+        snap = self.source.snapshot()
         self._history.append((snap, settings_json(self.source.settings), self.source.phase()))
         self._history_bytes += snap.nbytes
         while len(self._history) > 2 and self._history_bytes > self.history_limit:
@@ -529,16 +529,19 @@ class LabEngine:
         sim = preset.views()[0].sim
         frames = list(self._history)
         if frames[-1][0].step != sim.step:
-            frames.append((sim.snapshot(), settings_json(preset.settings), preset.phase()))
+            frames.append((preset.snapshot(), settings_json(preset.settings), preset.phase()))
         names = (sim.particles.count, sim.walls.names)
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
                     "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time(),
                     "watched": [list(pair) for pair in preset.watched()], "changes": preset.changes,
-                    "watched_labels": [pair_label(pair, *names) for pair in preset.watched()]}
+                    "watched_labels": [pair_label(pair, *names) for pair in preset.watched()],
+                    "views": [list(group) for group in _groups(preset.views())]}
+        layout, checkpoint = preset.file_simulation()
         rows = {name_: buffer.array() for name_, buffer in self.buffers.items() if name_ in preset.series}
         cycles = _cycle_records(self.buffers["cycles"], sim) if "cycles" in preset.series else []
         self.jobs.start("save", f"saving {path.name}", write_run,
-                        (path, copy.deepcopy(sim), frames, jsonable(protocol), dict(preset.series), rows, cycles))
+                        (path, copy.deepcopy(layout), checkpoint, frames, jsonable(protocol), dict(preset.series), rows,
+                         cycles))
         self._info(f"saving {len(frames)} frames to {path.name}…", "save")
 
     def _load(self, name: str) -> None:
@@ -571,7 +574,8 @@ class LabEngine:
         sim = preset.views()[0].sim
         watched = preset.watched()
         labels = [pair_label(pair, sim.particles.count, sim.walls.names) for pair in watched]
-        self.jobs.start("record", f"recording {path.name}", write_lab_movie, (path, frames, color, watched, labels))
+        self.jobs.start("record", f"recording {path.name}", write_lab_movie,
+                        (path, frames, color, watched, labels, _groups(preset.views())))
         self._info(f"recording {len(frames)} frames to {path.name}…", "record")
 
     def _job_done(self, outcome: JobOutcome) -> None:
@@ -616,6 +620,11 @@ class LabEngine:
         """The run itself failed: the state shows the error until play, a reset or a new preset."""
         self.error = text
         self.messages.add("error", text, "run")
+
+
+def _groups(views) -> list[tuple[str, int]]:
+    """(label, number of disks) of each view of a preset of several, for the labels under them."""
+    return [(view.label, view.sim.particles.count) for view in views] if len(views) > 1 else []
 
 
 def _cycle_records(buffer: SeriesBuffer, sim) -> list[tuple]:

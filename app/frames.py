@@ -123,12 +123,27 @@ def _i64(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.int64)
 
 
+def group_labels(positions: np.ndarray, radii: np.ndarray, groups) -> tuple[tuple[str, float, float], ...]:
+    """(text, x, y) of a label under each group of disks: ``groups`` lists (text, number of disks)
+    of consecutive disks; each label is centred under its group, half a mean radius below it."""
+    labels, start = [], 0
+    gap = 0.5 * float(radii.mean()) if len(radii) else 0.0
+    for text, count in groups:
+        x, r = positions[start:start + count, 0], radii[start:start + count]
+        bottom = positions[start:start + count, 1] - r
+        if count and text:
+            labels.append((str(text), float(0.5 * ((x - r).min() + (x + r).max())), float(bottom.min()) - gap))
+        start += count
+    return tuple(labels)
+
+
 def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
-                watched: list[list[tuple[int, int]]] | None = None) -> SceneFrame:
+                watched: list[list[tuple[int, int]]] | None = None, groups=()) -> SceneFrame:
     """A scene frame of one or more states drawn side by side (each shifted by its offset).
 
-    ``watched[k]`` lists the pairs (i, j) of part k to highlight. The per-disk and per-contact
-    fields are filled by one compiled pass over each part's contact table (the GIL released).
+    ``watched[k]`` lists the pairs (i, j) of part k to highlight; ``groups`` names groups of
+    consecutive disks (:func:`group_labels`). The per-disk and per-contact fields are filled by one
+    compiled pass over each part's contact table (the GIL released).
     """
     watched = watched or [[] for _ in parts]
     n_total = sum(data.positions.shape[0] for data, _ in parts)
@@ -157,12 +172,14 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
         if data.cell.any() and len(parts) == 1:
             cell = (float(data.cell[0]), float(data.cell[1]))
         n0, m0 = n0 + n, m0 + m
-    return SceneFrame(positions=np.concatenate(positions), radii=np.concatenate([d.radii for d, _ in parts]),
+    positions, radii = np.concatenate(positions), np.concatenate([d.radii for d, _ in parts])
+    return SceneFrame(positions=positions, radii=radii,
                       angles=np.concatenate([d.angles for d, _ in parts]), coordination=coordination,
                       pressure=pressure, sliding=sliding, contacts=segments, contact_force=force,
                       contact_kind=kind, walls=np.concatenate(walls).reshape(-1, 2, 2), cell=cell,
                       watched=np.concatenate(watched_segments).reshape(-1, 2, 2),
-                      watched_index=np.concatenate(watched_index).astype(np.int64))
+                      watched_index=np.concatenate(watched_index).astype(np.int64),
+                      labels=group_labels(positions, radii, groups))
 
 
 @numba.njit(**KERNEL)

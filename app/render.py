@@ -35,10 +35,10 @@ from engine.errors import ParameterError
 from engine.io import h5md
 from engine.io.outputs import check_output
 
-from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, PRESSURE_LUT,
-                      ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS,
-                      SceneFrame, cell_outline, disk_colors, force_class_thickness, force_classes, frame_bounds,
-                      frame_caption)
+from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, LABEL_SIZE,
+                      PRESSURE_LUT, ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS,
+                      WATCHED_THICKNESS, SceneFrame, cell_outline, disk_colors, force_class_thickness, force_classes,
+                      frame_bounds, frame_caption)
 from .frames import FrameData, build_frame
 
 SUFFIXES = (".png", ".gif", ".mp4")
@@ -493,6 +493,9 @@ def _draw_packing(ax: Axes, frame: SceneFrame, color_field: str, forces: bool, s
     _add_segments(ax, np.stack([frame.positions, tips], axis=1), SPOKE_COLOR,
                   max(MIN_LINE_PX, SPOKE_WIDTH * width), 3)
     _add_segments(ax, frame.walls, WALL_COLOR, max(2.0, WALL_WIDTH * width), 4, capstyle="projecting")
+    for text, x, y in frame.labels:
+        ax.text(x, y, text, ha="center", va="top", color=TEXT_COLOR,
+                fontsize=max(MIN_EM, LABEL_SIZE * width) * POINTS_PER_PIXEL)
     if frame.cell is not None:
         _add_segments(ax, cell_outline(frame.cell), CELL_COLOR, max(1.5, CELL_WIDTH * width), 4, dashes=(6.0, 4.0))
 
@@ -633,13 +636,16 @@ def _protocol(f) -> dict:
 
 def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
     """(SceneFrame, caption) of each frame ``indices`` of an open GranLab run file ``f``, with
-    the contacts the lab watched (a lab run's) and the phase of its protocol in the caption."""
+    the contacts the lab watched (a lab run's), its views named (the closed path's pairs) and the
+    phase of its protocol in the caption."""
     walls = h5md.walls_from_json(h5md.parameters(f)["walls_json"])
     normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
-    watched = [tuple(pair) for pair in _protocol(f).get("watched", [])]
+    protocol = _protocol(f)
+    watched = [tuple(pair) for pair in protocol.get("watched", [])]
+    groups = [tuple(group) for group in protocol.get("views", [])]
     for index in indices:
         raw = h5md.read_frame(f, index)
-        yield (build_frame([(FrameData.from_run_frame(raw, normals), (0.0, 0.0))], [watched]),
+        yield (build_frame([(FrameData.from_run_frame(raw, normals), (0.0, 0.0))], [watched], groups),
                frame_caption(raw["time"], raw["step"], raw.get("lab_phase", "")))
 
 

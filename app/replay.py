@@ -111,6 +111,7 @@ class Replay:
         self.readouts = None
         self.watched = [tuple(pair) for pair in protocol.get("watched", [])]
         self.watched_labels = list(protocol.get("watched_labels", []))
+        self.groups = [tuple(group) for group in protocol.get("views", [])]
         self.changes = list(protocol.get("changes", []))
 
     def _read_packing(self, path: Path, report) -> None:
@@ -141,7 +142,7 @@ class Replay:
                                   np.column_stack([self.times, steps, frames, [s.z for s in stats],
                                                    [s.phi for s in stats]]))}
         self.plot = "replay-structure"
-        self.watched, self.watched_labels = [], []
+        self.watched, self.watched_labels, self.groups = [], [], []
         self.changes = []
 
     def _strain_fit(self, until: float) -> dict | None:
@@ -216,9 +217,10 @@ def _packing_frame(index: int, state: PackingState) -> dict:
 
 
 
-def write_run(report, path: Path, sim, frames: list, protocol: dict, series: dict, rows: dict, cycles: list) -> str:
+def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol: dict, series: dict, rows: dict,
+              cycles: list) -> str:
     """Write a lab run file to ``path`` (the job of "Save run"): ``sim`` (a copy of the simulation:
-    its parameters and its checkpoint), ``frames`` (snapshot, settings JSON, phase) triples, the lab's
+    its parameters, and its checkpoint if ``checkpoint``), ``frames`` (snapshot, settings JSON, phase) triples, the lab's
     ``series`` (name -> columns) with their ``rows``, and the ``cycles`` records of ``granlab
     info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was written, for the user."""
     partial = partial_file(path)
@@ -231,19 +233,22 @@ def write_run(report, path: Path, sim, frames: list, protocol: dict, series: dic
                 writer.write_series(name, values)
             for record in cycles:
                 writer.write_cycle_record(*record)
-            writer.write_checkpoint(sim)
+            if checkpoint:
+                writer.write_checkpoint(sim)
         partial.replace(path)  # a file appears in the list only once complete
     finally:
         partial.unlink(missing_ok=True)
     return f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) to {path.name}"
 
 
-def write_lab_movie(report, path: Path, frames: list, color: str, watched: list, labels: list[str]) -> str:
+def write_lab_movie(report, path: Path, frames: list, color: str, watched: list, labels: list[str],
+                    groups: list) -> str:
     """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
-    the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend."""
+    the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend, the
+    ``groups`` of disks named under them (:func:`app.frames.group_labels`)."""
     from .render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
 
-    scenes = [(build_frame([(data, (0.0, 0.0))], [watched]), caption) for data, caption in frames]
+    scenes = [(build_frame([(data, (0.0, 0.0))], [watched], groups), caption) for data, caption in frames]
     bounds = union_bounds(scene for scene, _ in scenes)
 
     def rendered():

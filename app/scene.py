@@ -233,6 +233,8 @@ class SceneView:
         self._walls = lines("walls", WALL_COLOR)
         self._cell = lines("cell", CELL_COLOR)
         self._mechanism = lines("mechanism", MECHANISM_COLOR)
+        self._labels: list[viser.LabelHandle] = []
+        self._label_texts: tuple = ()
         scene.on_click()(self._on_scene_click)
         self._pose = None
         self._server.on_client_connect(self._on_client)
@@ -251,9 +253,11 @@ class SceneView:
     def handles(self) -> dict:
         """The viser handles, to read back what was sent: "disks" (batched mesh,
         None before the first draw), "spokes", "forces" (list, class 0 first),
-        "watched", "walls", "cell", "mechanism" (line segments)."""
+        "watched", "walls", "cell", "mechanism" (line segments), "labels" (list of the names under
+        groups of disks)."""
         return {"disks": self._disks, "spokes": self._spokes, "forces": list(self._forces),
-                "watched": self._watched, "walls": self._walls, "cell": self._cell, "mechanism": self._mechanism}
+                "watched": self._watched, "walls": self._walls, "cell": self._cell, "mechanism": self._mechanism,
+                "labels": list(self._labels)}
 
     @property
     def connected_clients(self) -> int:
@@ -357,10 +361,27 @@ class SceneView:
                 self._show(self._walls, _segments_3d(frame.walls, 0.0), WALL_THICKNESS * mean_radius)
                 outline = cell_outline(frame.cell) if frame.cell is not None else np.zeros((0, 2, 2))
                 self._show(self._cell, _segments_3d(outline, 0.0), CELL_THICKNESS * mean_radius)
+                self._show_labels(frame.labels)
             self.frames_pushed += 1
             now = monotonic()
             self._draw_times.append(now)
             self._forget_draws_before(now - 2.0)
+
+    def _show_labels(self, labels: tuple) -> None:
+        """The names under groups of disks (the closed path's pairs): made when the names change,
+        moved when their place does."""
+        texts = tuple(text for text, _, _ in labels)
+        if texts != self._label_texts:
+            for handle in self._labels:
+                handle.remove()
+            self._labels = [self._server.scene.add_label(f"{_ROOT}/labels/{k}", text, position=(x, y, 0.0),
+                                                         anchor="top-center")
+                            for k, (text, x, y) in enumerate(labels)]
+            self._label_texts = texts
+            return
+        for handle, (_, x, y) in zip(self._labels, labels):
+            if not np.allclose(handle.position, (x, y, 0.0)):
+                handle.position = (x, y, 0.0)
 
     def _forget_draws_before(self, oldest: float) -> None:
         while self._draw_times and self._draw_times[0] < oldest:

@@ -229,6 +229,38 @@ class Snapshot:
         return self.contacts.nbytes + sum(value.nbytes for value in values if isinstance(value, np.ndarray))
 
 
+def side_by_side(snapshots: list[Snapshot], offsets) -> Snapshot:
+    """One snapshot of several simulations without walls or periodic axes, drawn side by side
+    (the lab's closed path, a pair per tangential model): the disks of each shifted by its offset
+    and numbered on, its contacts renumbered with them, the energies summed; the time, step, law,
+    time step, box and stress are the first's."""
+    if any(len(snap.wall_names) or any(snap.periodic) for snap in snapshots):
+        raise ParameterError("snapshots", "with walls or a periodic cell", "simulations without walls or periodic axes")
+    starts = np.cumsum([0] + [len(snap.radii) for snap in snapshots])
+
+    def joined(name):
+        return np.concatenate([getattr(snap, name) for snap in snapshots])
+
+    def joined_contacts(name):
+        values = [getattr(snap.contacts, name) + (start if name in ("i", "j") else 0)
+                  for snap, start in zip(snapshots, starts)]
+        return np.concatenate(values)
+
+    first = snapshots[0]
+    contacts = ContactSnapshot(**{name: joined_contacts(name) for name in ContactSnapshot.__dataclass_fields__})
+    energy = EnergyBudget(**{name: sum(getattr(snap.energy, name) for snap in snapshots)
+                             for name in EnergyBudget.__dataclass_fields__})
+    shifted = np.concatenate([snap.positions + np.asarray(offset, dtype=float)
+                              for snap, offset in zip(snapshots, offsets)])
+    return Snapshot(time=first.time, step=first.step, positions=shifted, velocities=joined("velocities"),
+                    angles=joined("angles"), omegas=joined("omegas"), radii=joined("radii"), masses=joined("masses"),
+                    kinds=joined("kinds"), forces=joined("forces"), torques=joined("torques"), contacts=contacts,
+                    wall_names=(), wall_normals=np.zeros((0, 2)), wall_offsets=np.zeros(0), wall_forces=np.zeros(0),
+                    cell_lengths=first.cell_lengths, box_lengths=first.box_lengths, periodic=first.periodic,
+                    virial=sum(snap.virial for snap in snapshots), stress=first.stress, energy=energy, law=first.law,
+                    dt=first.dt, cell_control=first.cell_control, cell_target_stress=first.cell_target_stress)
+
+
 class Simulation:
     """A 2D DEM simulation of disks, walls and an optional periodic cell.
 

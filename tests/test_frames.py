@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from app.drawing import LABEL_SIZE, frame_bounds
 from app.frames import FrameData, build_frame
 from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_STICK
 
@@ -47,6 +48,16 @@ def test_parts_side_by_side_are_shifted_and_watched_separately():
     np.testing.assert_allclose(frame.positions[3:], data.positions + [10.0, 0.0])
     np.testing.assert_allclose(frame.watched, [frame.contacts[0]])
     assert build_frame([(data, (0.0, 0.0))], [[(2, 0)]]).watched.shape == (0, 2, 2)  # pairs are ordered i < j
+
+
+def test_groups_of_disks_are_named_under_them_and_inside_the_frame_bounds():
+    data = three_disks_on_a_floor()
+    frame = build_frame([(data, (0.0, 0.0)), (data, (10.0, 0.0))], groups=[("first", 3), ("second", 3)])
+    # centred under each group's disks (x from -1 to 5, shifted by 10), half a radius below the lowest
+    assert frame.labels == (("first", 2.0, -0.5), ("second", 12.0, -0.5))
+    xmin, xmax, ymin, _ = frame_bounds(frame)
+    assert ymin < -0.5 - LABEL_SIZE and xmin <= -1.0 and xmax >= 15.0
+    assert build_frame([(data, (0.0, 0.0))]).labels == ()
 
 
 def test_frame_from_a_live_simulation_matches_its_snapshot():

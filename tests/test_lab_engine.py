@@ -260,6 +260,28 @@ def test_save_then_replay_then_back_to_a_preset(engine, tmp_path):
     wait(lambda: engine.status()["preset"] == "block")
 
 
+def test_the_closed_path_saves_and_replays_every_pair_named_by_its_spring(tmp_path):
+    lab = LabEngine(tmp_path, preset="closed-path", speed=math.inf)
+    lab.start()
+    try:
+        wait(lambda: lab.status()["time"] > 1.0)
+        lab.submit("save", name="loops")
+        wait(lambda: "loops.h5" in lab.saved_files(), timeout=60.0)
+        with h5md.open_run(tmp_path / "loops.h5") as f:
+            last = h5md.read_frame(f, -1)
+            assert h5md.read_checkpoint(f) is None  # four laws in one file: nothing to resume
+        assert last["position"].shape == (8, 2) and last["contacts"]["pair"].tolist() == [[0, 1], [2, 3], [4, 5], [6, 7]]
+        assert re.fullmatch(r"loop \d+ · [ABCD] → [ABCD]", last["lab_phase"])
+        lab.submit("load", name="loops.h5")
+        wait(lambda: lab.status()["preset"] == "replay:loops.h5")
+        frame = wait(lambda: lab.frame(timeout=1.0)[1])
+        assert len(frame.radii) == 8
+        assert [text for text, _, _ in frame.labels] == ["Cundall–Strack", "α-corrected", "angle-based",
+                                                          "LAMMPS hooke/history"]
+    finally:
+        lab.stop()
+
+
 def test_a_save_never_writes_over_a_file_nor_follows_a_link_planted_in_the_data_folder(engine, tmp_path):
     outside = tmp_path.parent / f"{tmp_path.name}-outside.h5"
     outside.write_bytes(b"precious")

@@ -238,6 +238,17 @@ def test_walls_and_cell_outline(view):
     assert not walls.visible and not cell.visible and not view.handles["watched"].visible
 
 
+def test_names_under_groups_of_disks_are_made_once_and_follow_them(view):
+    frame = small_frame()
+    view.draw(SceneFrame(**{**frame.__dict__, "labels": (("Cundall–Strack", 1.0, -1.0), ("angle-based", 4.0, -1.0))}))
+    first = view.handles["labels"]
+    assert [h.text for h in first] == ["Cundall–Strack", "angle-based"]
+    view.draw(SceneFrame(**{**frame.__dict__, "labels": (("Cundall–Strack", 1.5, -1.0), ("angle-based", 4.0, -1.0))}))
+    assert view.handles["labels"] == first and tuple(first[0].position) == (1.5, -1.0, 0.0)
+    view.draw(frame)
+    assert view.handles["labels"] == []
+
+
 def test_first_draw_frames_the_camera_looking_down(view):
     frame = small_frame()
     view.draw(frame)

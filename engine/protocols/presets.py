@@ -28,7 +28,7 @@ import numpy as np
 from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
 from ..params import TANGENTIAL, TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall
-from ..simulation import Simulation
+from ..simulation import Simulation, Snapshot, side_by_side
 from ..state import ParticleState
 from .cyclic import CyclicLoad, apply_load
 from .equilibrium import equilibrium, measured_pressure
@@ -57,10 +57,12 @@ MAX_CHANGES = 200
 
 @dataclass(frozen=True)
 class View:
-    """A simulation to draw, shifted by ``offset`` (several side by side in one scene)."""
+    """A simulation to draw, shifted by ``offset`` (several side by side in one scene), named by
+    ``label`` under its disks (none for a preset of one simulation)."""
 
     sim: Simulation
     offset: tuple[float, float] = (0.0, 0.0)
+    label: str = ""
 
 
 class Preset(ABC):
@@ -144,6 +146,26 @@ class Preset(ABC):
 
     def views(self) -> list[View]:
         return [View(self._sim)]
+
+    def snapshot(self) -> Snapshot:
+        """The state of every view as one snapshot (a frame kept for saves and movies)."""
+        views = self.views()
+        if len(views) == 1:
+            return views[0].sim.snapshot()
+        return side_by_side([view.sim.snapshot() for view in views], [view.offset for view in views])
+
+    def file_simulation(self) -> tuple[Simulation, bool]:
+        """The simulation a run file of this preset is laid out on, and whether the file can hold
+        its checkpoint: the preset's own, or for several views a stand-in holding the disks of
+        :meth:`snapshot` (with the first view's law), whose state resumes nothing."""
+        views = self.views()
+        if len(views) == 1:
+            return views[0].sim, True
+        snap = self.snapshot()
+        particles = ParticleState(snap.positions, snap.radii, mass=snap.masses, kind=snap.kinds)
+        first = views[0].sim
+        return Simulation(particles, first.law, first.integration.replace(dt=first.dt),
+                          check_initial_overlap=False), False
 
     def advance(self, steps: int, deadline: float | None = None) -> int:
         """Run up to ``steps`` steps of the protocol, stopping on the way at every sample time
@@ -738,7 +760,8 @@ class ClosedPathPreset(Preset):
         return 4 * self.steps_per_side * self.dt
 
     def views(self) -> list[View]:
-        return [View(sim, (3.0 * index, 0.0)) for index, sim in enumerate(self._sims)]
+        return [View(sim, (3.0 * index, 0.0), TANGENTIAL[sim.law.tangential_model].label)
+                for index, sim in enumerate(self._sims)]
 
     def _target(self, k: int) -> np.ndarray:
         side, step = divmod(k, self.steps_per_side)
