@@ -208,12 +208,17 @@ class Dashboard:
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
 
     def _friction(self) -> None:
-        self.friction.disabled = self.no_sliding.value or self.viewer  # μ = ∞: the slider's value is not in effect
-        self.friction.name = "Friction μ (not in effect: μ = ∞)" if self.no_sliding.value else "Friction μ"
+        self._friction_in_effect(not self.no_sliding.value)
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
 
     def _control(self, key: str, value) -> None:
         self._command("apply", changes={key: value})
+
+    def _friction_in_effect(self, in_effect: bool, locked: bool = False) -> None:
+        """With μ = ∞ the slider's value is not in effect: it is disabled and says so (``locked``:
+        disabled anyway, in a replay)."""
+        self.friction.disabled = locked or not in_effect or self.viewer
+        self.friction.name = "Friction μ" if in_effect else "Friction μ (not in effect: μ = ∞)"
 
     def _job_row(self, kind: str) -> pn.Row:
         """What a file job is doing ("saving run1.h5… 40 %") and its Cancel button, shown while it runs."""
@@ -526,8 +531,7 @@ class Dashboard:
                 widget.value = value == math.inf
             elif widget is self.friction:
                 widget.value = widget.value if value == math.inf else float(value)
-                widget.disabled = widget.disabled or value == math.inf
-                widget.name = "Friction μ (not in effect: μ = ∞)" if value == math.inf else "Friction μ"
+                self._friction_in_effect(value != math.inf, locked=widget.disabled)
             else:
                 widget.value = value
         self.apply_reset.visible = "particles" in used

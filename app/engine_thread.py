@@ -487,9 +487,7 @@ class LabEngine:
         seconds = sum(r[3] for r in self._rate)
         span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
         simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0
-        state = "error" if self.error else ("waiting" if self.waiting else ("running" if self.running else
-                                                                            "stepping" if self._stepping is not None
-                                                                            else "paused"))
+        state = self._state()
         if self._stepping is not None:
             interval = self._stepping - self._step_from
             status["step_progress"] = (self._time() - self._step_from) / interval if interval > 0 else 1.0
@@ -510,6 +508,15 @@ class LabEngine:
                 self._frame_seq += 1
                 self._frame_taken = False
                 self._frame_ready.set()
+
+    def _state(self) -> str:
+        if self.error:
+            return "error"
+        if self.waiting:
+            return "waiting"
+        if self.running:
+            return "running"
+        return "stepping" if self._stepping is not None else "paused"
 
     def _remember(self) -> None:
         """Keep a frame of the running preset (all its views) with the settings in effect and its phase
@@ -539,6 +546,7 @@ class LabEngine:
         layout, checkpoint = preset.file_simulation()
         rows = {name_: buffer.array() for name_, buffer in self.buffers.items() if name_ in preset.series}
         cycles = _cycle_records(self.buffers["cycles"], sim) if "cycles" in preset.series else []
+        # a copy taken now: the job's thread pickles its arguments while this thread steps the run on
         self.jobs.start("save", f"saving {path.name}", write_run,
                         (path, copy.deepcopy(layout), checkpoint, frames, jsonable(protocol), dict(preset.series), rows,
                          cycles))

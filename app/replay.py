@@ -70,7 +70,6 @@ class Replay:
     def __init__(self, path: Path, report=lambda fraction: None):
         self.path = path
         self.name = f"replay:{path.name}"
-        self.contacts = None
         self.states: list[PackingState] = []
         if detect_format(path) == "h5md" and _is_run_file(path):
             self._read_run(path, report)
@@ -116,8 +115,9 @@ class Replay:
 
     def _read_packing(self, path: Path, report) -> None:
         contacts = path.with_name(f"{path.stem}-contacts{path.suffix}")
-        self.contacts = contacts if detect_format(path) == "lammps" and contacts.is_file() else None
-        reader = StateReader(path, contacts=self.contacts)
+        if detect_format(path) != "lammps" or not contacts.is_file():
+            contacts = None
+        reader = StateReader(path, contacts=contacts)
         states = self.states
         for k in range(reader.count):
             states.append(reader.read(k))
@@ -215,14 +215,13 @@ def _packing_frame(index: int, state: PackingState) -> dict:
                          "surface_gap": c.surface_gap}}
 
 
-
-
 def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol: dict, series: dict, rows: dict,
               cycles: list) -> str:
     """Write a lab run file to ``path`` (the job of "Save run"): ``sim`` (a copy of the simulation:
-    its parameters, and its checkpoint if ``checkpoint``), ``frames`` (snapshot, settings JSON, phase) triples, the lab's
-    ``series`` (name -> columns) with their ``rows``, and the ``cycles`` records of ``granlab
-    info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was written, for the user."""
+    its parameters, and its checkpoint if ``checkpoint``), ``frames`` (snapshot, settings JSON,
+    phase) triples, the lab's ``series`` (name -> columns) with their ``rows``, and the ``cycles``
+    records of ``granlab info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was
+    written, for the user."""
     partial = partial_file(path)
     try:
         with h5md.RunWriter(partial, sim, protocol=protocol, lab_series=series, overwrite=True) as writer:
