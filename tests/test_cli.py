@@ -1,6 +1,7 @@
 """The granlab command: JSON outputs and clear errors."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -106,7 +107,11 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     out = tmp_path / "run.h5"
     granlab("run", str(scene), "--out", str(out))
     kept = out.read_bytes()
+    hard_link = tmp_path / "same.h5"
+    os.link(out, hard_link)
     refusals = {
+        ("run", "--resume", str(out), "--out", str(hard_link), "--force"):
+            f"--out {str(hard_link)!r} is the input file: writing it would lose what it holds",
         ("run", str(scene), "--out", str(out)):
             f"--out {str(out)!r} exists: give --force to write over it, or another name "
             f"({str(tmp_path / 'run-2.h5')!r} is free)",

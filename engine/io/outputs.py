@@ -32,7 +32,8 @@ def check_output(path: str | Path, option: str = "--out", force: bool = False, i
     nearest existing folder cannot be written."""
     path = Path(path)
     for given in inputs:
-        if path.exists() and Path(given).exists() and path.resolve() == Path(given).resolve():
+        # the same file under any name: a symbolic or a hard link too
+        if path.exists() and Path(given).exists() and path.samefile(given):
             raise OutputError(f"{option} {str(path)!r} is the input file: writing it would lose what it holds; "
                               f"give another name ({str(free_name(path))!r} is free)")
     if folder:
