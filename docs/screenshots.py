@@ -57,7 +57,7 @@ def dismiss_software_notice(page) -> None:
     for frame in page.frames:
         if frame != page.main_frame:
             for button in frame.locator(".mantine-Notification-closeButton").all():
-                button.click()
+                button.dispatch_event("click")  # a click waits for a still page, which software WebGL rarely gives
     page.wait_for_timeout(500)
 
 
