@@ -35,6 +35,7 @@ from typing import Callable
 
 import numpy as np
 import viser
+from viser import _messages as viser_messages
 import websockets.asyncio.server
 from websockets.http11 import Request
 
@@ -190,6 +191,11 @@ class SceneView:
                                                                                           verbose=False)
         self._server.gui.configure_theme(show_logo=False, show_share_button=False)
         self._server.gui.main_panel.minimize()
+        # what a client may ask that the lab has no use for, a public share link first (it would
+        # open a tunnel from the presenter's machine to viser's relay): only clicks are heard
+        handlers = self._server._websock_server._incoming_handlers
+        for message in [m for m in handlers if m is not viser_messages.ScenePointerMessage]:
+            self._server._websock_server.unregister_handler(message)
         self._server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self._server.scene.configure_environment_map(environment_intensity=ENVIRONMENT_INTENSITY)
         self._lock = threading.Lock()

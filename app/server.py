@@ -38,6 +38,7 @@ import panel as pn
 import tornado.web
 import tornado.websocket
 from tornado.iostream import StreamClosedError
+from bokeh.protocol.exceptions import ProtocolError
 from bokeh.server.auth_provider import AuthProvider
 from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST
@@ -306,6 +307,29 @@ class ClosedTabFilter(logging.Filter):
         return "connection was closed" not in message and "WebSocketClosedError" not in message
 
 
+def mask_tokens_in_logs(tokens) -> None:
+    """From now on every log record writes the lab's ``tokens`` as ``…`` (the terminal the lab runs
+    in is often projected), and a websocket upgrade that does not speak bokeh's protocol is one
+    line, not a traceback."""
+    make_record = logging.getLogRecordFactory()
+
+    def masked(*args, **kwargs) -> logging.LogRecord:
+        record = make_record(*args, **kwargs)
+        if not tokens:
+            return record
+        message = record.getMessage()
+        if record.exc_info and isinstance(record.exc_info[1], ProtocolError):
+            message = f"refused a websocket that does not speak bokeh's protocol ({record.exc_info[1]}): " \
+                      f"{message.splitlines()[0].removeprefix('Uncaught exception ')}"
+            record.exc_info = record.exc_text = None
+        for token in tokens:
+            message = message.replace(token, "…")
+        record.msg, record.args = message, ()
+        return record
+
+    logging.setLogRecordFactory(masked)
+
+
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
           tokens: bool = False, history_mib: float = HISTORY_MIB, **changes) -> None:
     """Start the lab and serve until interrupted (prints the URL, or with tokens the presenter's and
@@ -327,6 +351,7 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
               **changes)
+    mask_tokens_in_logs(tuple(lab.roles))
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
               "class)", flush=True)

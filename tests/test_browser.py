@@ -7,6 +7,7 @@ run; elsewhere they skip when no Chromium is installed.
 """
 
 import json
+import logging
 import math
 import os
 import shutil
@@ -587,6 +588,32 @@ def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong"):
         assert http_status(url) == 403, url
     assert http_status(endpoint(token_lab["viewer"], "status")) == 200
+
+
+def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_line(caplog):
+    """The terminal of a lab is often projected: a request's address, an upgrade without bokeh's
+    protocol, any log line writes the tokens as '…'."""
+    from bokeh.protocol.exceptions import ProtocolError
+
+    from app.server import mask_tokens_in_logs
+
+    factory = logging.getLogRecordFactory()
+    try:
+        mask_tokens_in_logs(("presenterSECRET", "viewerSECRET"))
+        logging.getLogger("tornado.access").warning("%d GET %s (127.0.0.1)", 404, "/nothing?token=presenterSECRET")
+        try:
+            raise ProtocolError("Subprotocol header is not 'bokeh'")
+        except ProtocolError:
+            logging.getLogger("tornado.application").error(
+                "Uncaught exception GET /ws?token=viewerSECRET (127.0.0.1)\nHTTPServerRequest(uri='/ws?token="
+                "viewerSECRET')", exc_info=True)
+    finally:
+        logging.setLogRecordFactory(factory)
+    assert [r.getMessage() for r in caplog.records] == [
+        "404 GET /nothing?token=… (127.0.0.1)",
+        "refused a websocket that does not speak bokeh's protocol (Subprotocol header is not 'bokeh'): "
+        "GET /ws?token=… (127.0.0.1)"]
+    assert "SECRET" not in caplog.text and "Traceback" not in caplog.text
 
 
 def lab_only(page, lab) -> None:

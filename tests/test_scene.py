@@ -378,6 +378,24 @@ def test_browser_click_on_a_disk_calls_on_pick_and_clients_are_counted(view):
     assert _wait_for(lambda: view.connected_clients == 0)
 
 
+def test_a_client_is_heard_only_for_clicks_and_its_camera(view):
+    """Viser answers a client's request for a public share link by opening a tunnel from this
+    machine to its relay: a viewer's page could ask it although its button is hidden. Every
+    message a client may send but a click (and the camera each client reports) goes unheard."""
+    from viser import _messages
+
+    assert list(view.server._websock_server._incoming_handlers) == [_messages.ScenePointerMessage]
+    ws = _test_client(view.port)
+    try:
+        assert _wait_for(lambda: view.connected_clients == 1)
+        for name in ("ShareUrlRequest", "ShareUrlDisconnect"):
+            ws.send(msgspec.msgpack.encode({"type": name}))
+        time.sleep(1.0)
+        assert view.server._share_tunnel is None and view.connected_clients == 1
+    finally:
+        ws.close()
+
+
 def _click(ws, x, y):
     ws.send(msgspec.msgpack.encode({
         "type": "ScenePointerMessage", "event_type": "click", "ray_origin": [x, y, 20.0],
