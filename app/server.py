@@ -355,17 +355,33 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
               "class)", flush=True)
-        print(f"GranLab lab at {lab.url} (the presenter's address: it controls the simulation and writes files "
-              "in the data folder; keep it to yourself)", flush=True)
+        where = write_presenter_address(Path(data_dir), lab.url)
+        print(f"GranLab lab ready; the presenter's address is in {where} (not printed: a projector may show this "
+              f"terminal; it controls the simulation and writes files). Open it with: python -m webbrowser "
+              f"\"$(cat {where})\"", flush=True)
     else:
         print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)
     lab.run_forever()
 
 
+PRESENTER_FILE = ".presenter-address"
+"""The file of the data folder the presenter's address is written to (readable by its owner only)."""
+
+
+def write_presenter_address(data_dir: Path, url: str) -> Path:
+    """Write the presenter's address into the data folder, readable by this user only; its path."""
+    path = data_dir / PRESENTER_FILE
+    path.unlink(missing_ok=True)  # made anew, so that no one else's file or link is written through
+    handle = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(handle, "w") as out:
+        out.write(url + "\n")
+    return path
+
+
 def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
-    benchmarks and tests); returns the process, the URL it prints once serving and the viewers'
-    URL (None without tokens)."""
+    benchmarks and tests); returns the process, the URL it prints once serving (with tokens, the
+    presenter's, from its file) and the viewers' URL (None without tokens)."""
     process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", "0", "--data-dir", str(data_dir),
                                 *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.time() + timeout
@@ -379,6 +395,8 @@ def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
         found = re.search(r"GranLab lab at (http://\S+)", line)
         if found:
             return process, found.group(1), viewer
+        if "GranLab lab ready" in line:
+            return process, (Path(data_dir) / PRESENTER_FILE).read_text().strip(), viewer
     process.kill()
     raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
 

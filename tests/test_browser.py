@@ -588,6 +588,9 @@ def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong"):
         assert http_status(url) == 403, url
     assert http_status(endpoint(token_lab["viewer"], "status")) == 200
+    # the presenter's address is not printed (a projector may show the terminal) but kept for its owner
+    kept = token_lab["data"] / ".presenter-address"
+    assert kept.stat().st_mode & 0o777 == 0o600 and kept.read_text().strip() == token_lab["url"]
 
 
 def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_line(caplog):
