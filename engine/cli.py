@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from importlib.metadata import version
@@ -31,7 +32,7 @@ from pathlib import Path
 import numba
 
 from .analysis import ANALYSES, LOADS
-from .errors import DivergenceError, GranLabError
+from .errors import DivergenceError, GranLabError, ParameterError
 from .io.jsonsafe import jsonable
 from .params import TANGENTIAL, TANGENTIAL_MODELS
 from .protocols.prepare import CELL_MASS_READINGS
@@ -357,7 +358,7 @@ _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "fi
 def _reproduce(args) -> dict:
     from .reproduce import (PAPER_SIZE, Reproduction, finished_samples, resume_folder, run_reproduction,
                             start_folder, summarize_series)
-    from .studies import text_progress
+    from .studies import STUDY_LIMITS, text_progress
 
     given = {key: getattr(args, option[2:].replace("-", "_")) for key, option in _REPRODUCTION_OPTIONS.items()}
     given = {key: value for key, value in given.items() if value is not None}
@@ -368,6 +369,9 @@ def _reproduce(args) -> dict:
             raise GranLabError(f"--series summarises the folders' samples as they are and runs nothing: "
                                f"drop {', '.join(options)}")
         return summarize_series(args.table, args.series)
+    if args.workers is not None and args.workers > STUDY_LIMITS["workers"]:
+        raise ParameterError("--workers", args.workers, f"from 1 to {STUDY_LIMITS['workers']} (a worker is a process "
+                                                        f"of its own; this machine has {os.cpu_count()} cores)")
     if args.resume:
         reproduction = resume_folder(args.resume)
         if reproduction.name != args.table:
@@ -384,8 +388,8 @@ def _reproduce(args) -> dict:
         reproduction = Reproduction(args.table, **given)
         folder = None if args.out is None else start_folder(args.out, reproduction)
     try:
-        return run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
-                                progress=None if args.json else text_progress, folder=folder)
+        result = run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
+                                  progress=None if args.json else text_progress, folder=folder)
     except KeyboardInterrupt:
         if folder is None:
             raise
@@ -393,6 +397,11 @@ def _reproduce(args) -> dict:
         print(f"\ninterrupted: {len(finished_samples(folder))} of {total} samples are in {folder}; go on with "
               f"granlab reproduce {args.table} --resume {folder}", file=sys.stderr)
         raise SystemExit(130) from None
+    if result["failed"] and len(result["failed"]) == len(result["samples"]):
+        first = result["failed"][0]
+        raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "
+                           f"{first['seed']} ({first['case']}): {first['error']}")
+    return result
 
 
 def _print_reproduce(result: dict) -> None:

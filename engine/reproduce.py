@@ -45,6 +45,7 @@ from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
 from .params import nonnegative
 from .state import STATUS_NONE
+from .studies import STUDY_LIMITS
 
 PHI_I = 0.36
 """Solid fraction of the initial gas (the I-state; Tables II-V use ``Phi_I = 0.3631 ± 0.0006``)."""
@@ -159,6 +160,10 @@ QUANTITIES = {
 }
 
 
+MAX_STAGE_TIME = 1e5
+"""The longest preparation stage a reproduction runs, in T0 (200 times the default)."""
+
+
 @dataclass(frozen=True)
 class Reproduction:
     """The settings of one reproduction: ``samples`` of ``particles`` disks for every case, with
@@ -188,12 +193,14 @@ class Reproduction:
 
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
-        for key, least in (("particles", 2), ("samples", 1), ("cell_mass_disks", 1)):
+        for key, least, most in (("particles", 2, STUDY_LIMITS["particles"]), ("samples", 1, STUDY_LIMITS["samples"]),
+                                 ("cell_mass_disks", 1, STUDY_LIMITS["particles"])):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-                raise ParameterError(key, value, f"a whole number >= {least}")
-        if not self.max_time > 0:
-            raise ParameterError("max_time", self.max_time, "a positive duration")
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not least <= value <= most:
+                raise ParameterError(key, value, f"a whole number from {least} to {most}")
+        if not 0 < self.max_time <= MAX_STAGE_TIME:
+            raise ParameterError("max_time", self.max_time, f"a duration > 0 and at most {MAX_STAGE_TIME:g} T0 (each "
+                                                            f"stage of a sample would otherwise run for days)")
         nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
         check_cell_mass_reading(self.cell_mass)
 

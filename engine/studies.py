@@ -32,6 +32,11 @@ from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
 
 
+STUDY_LIMITS = {"particles": 20000, "samples": 10000, "cycles": 100000, "period": (0.1, 1e4), "workers": 256}
+"""The largest study run here (the lab's largest box; a count of samples, cycles and workers, a
+period in τ whose work a cluster finishes in days, not years), checked before any work starts."""
+
+
 @dataclass(frozen=True)
 class RatchetStudy:
     """The settings of a ratchet study (paper units: box L = 1, pressure p = 1, density 1).
@@ -62,8 +67,13 @@ class RatchetStudy:
     def __post_init__(self):
         for name in ("particles", "samples", "cycles"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-                raise ParameterError(name, value, "a whole number > 0")
+            most = STUDY_LIMITS[name]
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= most:
+                raise ParameterError(name, value, f"a whole number from 1 to {most}")
+        low, high = STUDY_LIMITS["period"]
+        if not low <= self.period <= high:
+            raise ParameterError("period", self.period, f"from {low:g} to {high:g} τ (quasi-static loading is slow "
+                                                        f"next to τ; longer cycles would run for days)")
         for model in self.models:
             if model not in TANGENTIAL_MODELS:
                 raise ParameterError("model", model, "one of " + ", ".join(TANGENTIAL_MODELS) + " or all")
@@ -83,7 +93,6 @@ class RatchetStudy:
                                  f"at most {largest:.4g}: above, dt exceeds the stability bound of these disks")
         nonnegative("friction", self.friction, allow_inf=True)
         positive("amplitude", self.amplitude)
-        positive("period", self.period)
         nonnegative("gravity", self.gravity)
 
 

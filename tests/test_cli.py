@@ -137,6 +137,33 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     assert json.loads(granlab("info", str(out), "--json").stdout)["last_time"] == pytest.approx(3.5)
 
 
+@pytest.mark.parametrize("args, message", [
+    (["study", "ratchet", "--samples", "1000000000"], "samples = 1000000000 is not allowed: a whole number from 1 to 10000"),
+    (["study", "ratchet", "--cycles", "1000000000000"], "cycles = 1000000000000 is not allowed: a whole number from 1 to"),
+    (["study", "ratchet", "--period", "1e-300"], "period = 1e-300 is not allowed: from 0.1 to 10000 τ"),
+    (["reproduce", "gilabert-method1", "--samples", "100000000"], "samples = 100000000 is not allowed: a whole number from 1 to"),
+    (["reproduce", "gilabert-method1", "--workers", "100000"], "--workers = 100000 is not allowed: from 1 to 256"),
+    (["reproduce", "gilabert-method1", "--max-time", "1e300"], "max_time = 1e+300 is not allowed: a duration > 0 and at most"),
+])
+def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, monkeypatch, args, message):
+    from engine import cli
+
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(args + ["--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and message in error
+    assert list(tmp_path.iterdir()) == []  # no folder made, no cluster started
+
+
+def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
+    from engine import cli, reproduce
+
+    failed = [{"case": "noncohesive", "seed": seed, "error": "DivergenceError: overlap"} for seed in (0, 1)]
+    monkeypatch.setattr(reproduce, "run_reproduction", lambda *a, **k: {"failed": failed, "samples": failed})
+    assert cli.main(["reproduce", "gilabert-method1"]) == 2
+    assert "every sample failed (2 of 2); seed 0 (noncohesive): DivergenceError: overlap" in capsys.readouterr().err
+
+
 def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, capsys):
     import h5py
 
