@@ -698,6 +698,14 @@ def run_args(args) -> int:
     except GranLabError as error:
         print(f"granlab {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except Exception as error:
+        from .io import h5md
+
+        source = next((getattr(args, name) for name in ("runfile", "resume") if getattr(args, name, None)), None)
+        if source is None or not h5md.raised_by_damage(error):
+            raise
+        print(f"granlab {args.command}: error: {h5md.damaged(source, error)}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(jsonable(result)))
     else:

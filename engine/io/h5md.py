@@ -22,7 +22,12 @@ checkpoint, so a run killed at any moment leaves a file readable up to its last 
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import json
+import os
+import struct
+import traceback
+import weakref
 from pathlib import Path
 
 import h5py
@@ -33,6 +38,7 @@ from ..errors import GranLabError, OutputError
 from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
+from . import superblock
 from .outputs import occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
@@ -218,6 +224,10 @@ class RunWriter:
         self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
         self._create_checkpoint(f.create_group("checkpoint"), sim)
         f.swmr_mode = True
+        # a lock of our own while writing (SWMR writing drops HDF5's): a reader tells a live writer
+        # from a killed one by it
+        self._writing = open(self.path, "rb")
+        fcntl.fcntl(self._writing, fcntl.F_OFD_SETLK, _FLOCK.pack(fcntl.F_RDLCK, os.SEEK_SET, 0, 0, 0))
         self.watch = list(watch or [])
         self._handles = {}
         self._cycles = []
@@ -376,6 +386,7 @@ class RunWriter:
         if self.file.id.valid:
             self._write_cycles()
             self.file.close()
+        self._writing.close()
 
     def __enter__(self) -> "RunWriter":
         return self
@@ -403,9 +414,11 @@ def watched_contacts(sim: Simulation, pairs: list[tuple[int, int]]):
 def open_run(path: str | Path) -> h5py.File:
     """Open a run file for reading.
 
-    Without SWMR, which finds a truncated file at once (HDF5's SWMR reader retries the missing
-    bytes for ever). Only a file still marked as being written (a live writer, or one that was
-    killed) is opened in SWMR mode, after its header's end of file is checked against its size.
+    Without SWMR, which finds a truncated or damaged file at once (HDF5's SWMR reader retries a
+    failed read for ever). Only a file being written by a live writer is opened in SWMR mode;
+    one still marked as being written by a writer that was killed is read as if it had been
+    closed (:class:`engine.io.superblock.FinishedWriteView`), after its header's end of file is
+    checked against its size.
     """
     path = Path(path)
     if not path.is_file():
@@ -417,37 +430,72 @@ def open_run(path: str | Path) -> h5py.File:
             raise _truncated(path) from error
         if "already open for write" not in str(error):
             raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
-    if _stored_eof(path) > path.stat().st_size:
+    if superblock.stored_eof(path) > path.stat().st_size:
         raise _truncated(path)
     try:
-        return h5py.File(path, "r", libver="latest", swmr=True)
-    except OSError as error:
+        if _being_written(path):
+            return h5py.File(path, "r", libver="latest", swmr=True)
+        view = superblock.FinishedWriteView(path)
+        f = h5py.File(view, "r")
+    except (OSError, ValueError) as error:
         raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
+    weakref.finalize(f, view.close)
+    return f
 
 
-def _stored_eof(path: Path) -> int:
-    """The end of file an HDF5 file's superblock (version 2 or 3, which SWMR needs) records;
-    0 when there is no such superblock at the offsets HDF5 allows (0, 512, 1024, ...)."""
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        offset = 0
-        while offset + 48 <= size:
-            f.seek(offset)
-            head = f.read(48)
-            if head[:8] == b"\x89HDF\r\n\x1a\n":
-                if head[8] not in (2, 3) or head[9] != 8:
-                    return 0
-                base, _extension, eof = np.frombuffer(head[12:36], dtype="<u8")
-                return int(base + eof)
-            offset = 512 if offset == 0 else 2 * offset
-    return 0
+_FLOCK = struct.Struct("@hhqqi4x")
+"""Linux's ``struct flock`` (type, whence, start, length, pid): the record lock a RunWriter holds
+on its file. An open-file-description lock: neither HDF5's own locks (flock, which every reader
+holds while the file is open) nor another descriptor's close in the writer's process touch it."""
+
+
+def _being_written(path: Path) -> bool:
+    """Whether a live :class:`RunWriter` holds ``path``."""
+    with open(path, "rb") as probe:
+        answer = fcntl.fcntl(probe, fcntl.F_OFD_GETLK, _FLOCK.pack(fcntl.F_WRLCK, os.SEEK_SET, 0, 0, 0))
+    return _FLOCK.unpack(answer)[0] != fcntl.F_UNLCK
 
 
 def _truncated(path: Path) -> RunFileError:
-    stored, size = _stored_eof(path), path.stat().st_size
+    stored, size = superblock.stored_eof(path), path.stat().st_size
     of = f" of the {stored} its header records" if stored > size else ""
     return RunFileError(f"run file {str(path)!r} is truncated: {size} bytes{of}, so frames, checkpoint and "
                         f"parameters past the cut are lost (was it cut short while copied or written?)")
+
+
+def raised_by_damage(error: BaseException) -> bool:
+    """Whether ``error`` tells of a damaged file: a read HDF5 could not do (it came out of h5py), or
+    text in the file that does not decode."""
+    if isinstance(error, (json.JSONDecodeError, UnicodeDecodeError)):
+        return True
+    return isinstance(error, (OSError, KeyError, ValueError, RuntimeError)) and any(
+        "/h5py/" in frame.filename for frame in traceback.extract_tb(error.__traceback__))
+
+
+def damaged(path: str | Path, error: BaseException) -> RunFileError:
+    """The error that names a damaged file: what went wrong, and for a run file the last frame and
+    the checkpoint that can still be read (each found without a hang: see :func:`open_run`)."""
+    reason = f"{type(error).__name__}: {str(error).strip(chr(39) + chr(34))}"
+    kept = ""
+    try:
+        with open_run(path) as f:
+            count, last = frame_count(f), None
+            for index in range(count - 1, -1, -1):
+                try:
+                    last = read_frame(f, index)
+                    break
+                except Exception:  # a damaged frame: the one before may be whole
+                    continue
+            try:
+                checkpoint = read_checkpoint(f)
+            except Exception:
+                checkpoint = None
+        frames = f"frames up to {last['index']} (t = {last['time']:.6g}) read whole" if last else "no frame reads whole"
+        resume = f"a checkpoint at step {int(checkpoint['step'])}" if checkpoint else "no checkpoint"
+        kept = f"; {frames}, {resume}"
+    except Exception:  # not even its layout reads
+        pass
+    return RunFileError(f"{str(path)!r} is damaged ({reason}){kept}")
 
 
 def is_run_file(f: h5py.File) -> bool:
