@@ -108,14 +108,21 @@ WRITER = textwrap.dedent("""
 """)
 
 
-def test_a_writer_killed_mid_run_leaves_a_readable_file(tmp_path):
-    path = tmp_path / "crash.h5"
+@pytest.fixture(scope="module")
+def killed_run(tmp_path_factory):
+    """A run file whose writer was killed (still marked as being written), with frames and checkpoints."""
+    path = tmp_path_factory.mktemp("killed") / "killed.h5"
     script = WRITER.format(tests=str(Path(__file__).parent), path=str(path))
     process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     assert process.stdout.readline().strip() == "ready"
     time.sleep(2.0)
     process.send_signal(signal.SIGKILL)
     process.wait()
+    return path
+
+
+def test_a_writer_killed_mid_run_leaves_a_readable_file(killed_run, tmp_path):
+    path = killed_run
     with h5md.open_run(path) as f:
         frames = h5md.frame_count(f)
         assert frames >= 2
@@ -130,19 +137,6 @@ def test_a_writer_killed_mid_run_leaves_a_readable_file(tmp_path):
     cut.write_bytes(path.read_bytes()[:path.stat().st_size // 2])
     with pytest.raises(h5md.RunFileError, match="is truncated"):
         h5md.open_run(cut)
-
-
-@pytest.fixture(scope="module")
-def killed_run(tmp_path_factory):
-    """A run file whose writer was killed (still marked as being written), with frames and checkpoints."""
-    path = tmp_path_factory.mktemp("killed") / "killed.h5"
-    script = WRITER.format(tests=str(Path(__file__).parent), path=str(path))
-    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    assert process.stdout.readline().strip() == "ready"
-    time.sleep(2.0)
-    process.send_signal(signal.SIGKILL)
-    process.wait()
-    return path
 
 
 def _damage(data: bytes, how: str) -> bytes:
