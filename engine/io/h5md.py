@@ -416,9 +416,9 @@ def open_run(path: str | Path) -> h5py.File:
 
     Without SWMR, which finds a truncated or damaged file at once (HDF5's SWMR reader retries a
     failed read for ever). Only a file being written by a live writer is opened in SWMR mode;
-    one still marked as being written by a writer that was killed is read as if it had been
-    closed (:class:`engine.io.superblock.FinishedWriteView`), after its header's end of file is
-    checked against its size.
+    one still marked as being written by a writer that was killed, or that stopped on a full
+    disk, is read as if it had been closed (:class:`engine.io.superblock.FinishedWriteView`), up to
+    the end of what it wrote.
     """
     path = Path(path)
     if not path.is_file():
@@ -426,14 +426,14 @@ def open_run(path: str | Path) -> h5py.File:
     try:
         return h5py.File(path, "r")
     except OSError as error:
-        if "truncated file" in str(error):
+        if "truncated file" in str(error) and not superblock.left_open(path):  # a closed file cut short
             raise _truncated(path) from error
-        if "already open for write" not in str(error):
+        if "truncated file" not in str(error) and "already open for write" not in str(error):
             raise RunFileError(f"{str(path)!r} is not a readable HDF5 file: {error}") from error
-    if superblock.stored_eof(path) > path.stat().st_size:
-        raise _truncated(path)
     try:
         if _being_written(path):
+            if superblock.stored_eof(path) > path.stat().st_size:
+                raise _truncated(path)
             return h5py.File(path, "r", libver="latest", swmr=True)
         view = superblock.FinishedWriteView(path)
         f = h5py.File(view, "r")

@@ -45,6 +45,12 @@ def stored_eof(path: Path) -> int:
     return base + eof
 
 
+def left_open(path: Path) -> bool:
+    """Whether the superblock says a writer has the file open (a live writer, or one that died)."""
+    found = find(path)
+    return found is not None and found[1][FLAGS] != 0
+
+
 def _rotate(x: int, k: int) -> int:
     return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
 
@@ -79,8 +85,10 @@ def lookup3(data: bytes, initial: int = 0) -> int:
 
 
 class FinishedWriteView(io.RawIOBase):
-    """The file at ``path`` as HDF5 reads it, its superblock's 'being written' flags cleared and its
-    checksum made anew: a file whose writer is gone, read as if the writer had closed it."""
+    """The file at ``path`` as HDF5 reads it, its superblock's 'being written' flags cleared, its
+    end of file at most the file's size (a writer stopped by a full disk records more than it could
+    write) and its checksum made anew: a file whose writer is gone, read as if the writer had
+    closed it. What lay past the end then reads as damaged, not as missing for ever."""
 
     def __init__(self, path: Path):
         super().__init__()
@@ -91,6 +99,9 @@ class FinishedWriteView(io.RawIOBase):
         self._at, head = found
         head = bytearray(head)
         head[FLAGS] = 0
+        base = int.from_bytes(head[12:20], "little")
+        eof = min(int.from_bytes(head[28:36], "little"), self.path.stat().st_size - base)
+        head[28:36] = eof.to_bytes(8, "little")
         head[CHECKSUM:HEAD] = lookup3(bytes(head[:CHECKSUM])).to_bytes(4, "little")
         self._head = bytes(head)
         self._file = open(self.path, "rb")
