@@ -32,7 +32,7 @@ from pathlib import Path
 import numba
 
 from .analysis import ANALYSES, LOADS
-from .errors import DivergenceError, GranLabError, ParameterError
+from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed
 from .io.jsonsafe import jsonable
 from .params import TANGENTIAL, TANGENTIAL_MODELS
 from .protocols.prepare import CELL_MASS_READINGS
@@ -695,6 +695,10 @@ def run_args(args) -> int:
     """Run a parsed command: print its result (or one JSON object); errors exit with status 2."""
     try:
         result = args.handler(args)
+    except WriteFailed as error:
+        print(f"granlab {args.command}: error: {error}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(2)  # see WriteFailed: an exit that closes the file would crash the process
     except GranLabError as error:
         print(f"granlab {args.command}: error: {error}", file=sys.stderr)
         return 2

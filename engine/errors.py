@@ -45,3 +45,10 @@ class SceneError(GranLabError, ValueError):
 
 class OutputError(GranLabError, OSError):
     """An output that cannot be written, or would write over a file that was not given up."""
+
+
+class WriteFailed(OutputError):
+    """A run file's write failed on the way (a full disk, a file size limit, an I/O error). Its
+    HDF5 handle is left as it is: closing it would write again, and h5py then crashes the process
+    as it exits; a command ends the process at once after saying so (``os._exit``). The file reads
+    up to what was written, as a killed writer's does."""

@@ -1,6 +1,7 @@
 """Run files: H5MD layout, an independent reader, crashes, bit-identical resume, bad input."""
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -245,6 +246,38 @@ def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
     assert resumed["run_file"].endswith("part-resumed.h5")
     info = cli("info", str(tmp_path / "whole.h5"), "--json")
     assert info["frames"] == 2 and info["particles"] == 60 and info["checkpoint_step"] == 4000
+
+
+def test_a_run_stopped_by_a_full_disk_says_so_in_one_line_and_its_file_resumes(tmp_path):
+    """A file size limit (as a full disk) stops the writer mid-run: one line, exit 2, no crash; the
+    frames written before read back in order and --resume goes on from the last checkpoint to the
+    scene's end, as the uninterrupted run does."""
+    import resource
+
+    scene_file = tmp_path / "box.toml"
+    scene_file.write_text(SCENE.replace("steps = 4000", "steps = 4000\nrecord_every = 50"))
+    limit = 1_200_000
+
+    def small_disk():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    out = tmp_path / "full.h5"
+    process = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(scene_file), "--out", str(out)],
+                             capture_output=True, text=True, timeout=600, preexec_fn=small_disk)
+    assert process.returncode == 2 and process.stderr.count("\n") == 1, process.stderr
+    found = re.search(r"writing '.*full.h5' failed at step (\d+): File too large\. What was written before stays "
+                      r"readable; granlab run --resume '.*full.h5' goes on from its last checkpoint \(step (\d+)\)",
+                      process.stderr)
+    assert found and out.stat().st_size <= limit, process.stderr
+    failed_at, checkpoint = int(found.group(1)), int(found.group(2))
+    with h5md.open_run(out) as f:
+        steps = f["particles/all/position/step"][:h5md.frame_count(f)]
+        assert steps[0] == 0 and np.all(np.diff(steps) == 50) and checkpoint <= steps[-1] < failed_at
+        assert h5md.read_checkpoint(f)["step"] == checkpoint
+    resumed = subprocess.run([sys.executable, "-m", "engine.cli", "run", "--resume", str(out), "--json"],
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads(resumed.stdout)["steps"] == 4000
 
 
 def test_bad_run_files_give_clear_errors(tmp_path):

@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import dataclasses
 import fcntl
+import functools
 import json
 import os
+import re
 import struct
 import traceback
 import weakref
@@ -34,7 +36,7 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..errors import GranLabError, OutputError
+from ..errors import GranLabError, OutputError, WriteFailed
 from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
@@ -149,6 +151,31 @@ def cell_from_json(text: str) -> PeriodicCell | None:
     return PeriodicCell(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
+def _write(method):
+    """A write of a :class:`RunWriter`: an OS error ends the writer with :class:`WriteFailed`, and
+    no later call touches its file."""
+    @functools.wraps(method)
+    def write(self, *args, **kwargs):
+        if self.failed is not None:
+            raise self.failed
+        try:
+            return method(self, *args, **kwargs)
+        except (OSError, RuntimeError) as error:
+            found = re.search(r"error message = '([^']*)'", str(error))
+            reason = found.group(1) if found else (getattr(error, "strerror", None) or str(error))
+            kept = (f"granlab run --resume {str(self.path)!r} goes on from its last checkpoint (step "
+                    f"{self.checkpoint_step})" if self.checkpoint_step is not None else "it holds no checkpoint yet")
+            self.failed = WriteFailed(f"writing {str(self.path)!r} failed at step {_step_of(args)}: {reason}. What "
+                                      f"was written before stays readable; {kept}")
+            raise self.failed from error
+    return write
+
+
+def _step_of(args) -> str:
+    state = args[0] if args else None
+    return str(getattr(state, "step", "?"))
+
+
 class RunWriter:
     """Writes a run file for one simulation.
 
@@ -224,6 +251,8 @@ class RunWriter:
         self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
         self._create_checkpoint(f.create_group("checkpoint"), sim)
         f.swmr_mode = True
+        self.failed: WriteFailed | None = None
+        self.checkpoint_step: int | None = None
         # a lock of our own while writing (SWMR writing drops HDF5's): a reader tells a live writer
         # from a killed one by it
         self._writing = open(self.path, "rb")
@@ -276,6 +305,7 @@ class RunWriter:
         append_row(self._get(f"{path}/time"), time)
         append_row(self._get(f"{path}/step"), step)
 
+    @_write
     def write_frame(self, state, settings: str | None = None, phase: str | None = None) -> None:
         """Append a frame (positions, contacts, observables) from a :class:`Simulation` or a
         :class:`Snapshot` taken earlier, and the cycle records waiting in memory; flush.
@@ -324,6 +354,7 @@ class RunWriter:
         100 records."""
         self.write_cycle_record(cycle, sim.step, sim.time, length_x, length_y, sim.walls.offset)
 
+    @_write
     def write_cycle_record(self, cycle: int, step: int, time: float, length_x: float, length_y: float,
                            wall_position) -> None:
         """Record a loading cycle taken earlier (as :meth:`write_cycle`); ``wall_position`` (W,)."""
@@ -331,6 +362,7 @@ class RunWriter:
         if len(self._cycles) >= 100:
             self._write_cycles()
 
+    @_write
     def write_series(self, name: str, rows: np.ndarray) -> None:
         """Append rows (R, C) to the lab series ``name``; flush."""
         dataset = self._get(f"observables/lab/{name}")
@@ -358,6 +390,7 @@ class RunWriter:
                 dataset[n:] = values
         self.file.flush()
 
+    @_write
     def write_contact_sample(self, sim: Simulation) -> None:
         """Record (F_n, F_t, status) of the watched pairs (zeros and status 0 when not interacting).
         Samples wait in memory like cycle records."""
@@ -366,6 +399,7 @@ class RunWriter:
         if len(self._samples) >= 1000:
             self._write_cycles()
 
+    @_write
     def write_checkpoint(self, sim: Simulation) -> None:
         """Write the full state into the older slot, then mark it valid; flush."""
         self._write_cycles()
@@ -381,9 +415,10 @@ class RunWriter:
         self.file.flush()
         group["valid"][...] = [slot, sim.step]
         self.file.flush()
+        self.checkpoint_step = sim.step
 
     def close(self) -> None:
-        if self.file.id.valid:
+        if self.failed is None and self.file.id.valid:
             self._write_cycles()
             self.file.close()
         self._writing.close()
@@ -511,7 +546,9 @@ def require_run_file(f: h5py.File, command: str) -> None:
 
 
 def frame_count(f: h5py.File) -> int:
-    """Complete frames: the fewest frames any time-dependent particle element holds."""
+    """Complete frames: the fewest frames any time-dependent particle element holds, and in a run
+    file those before the first whose step goes back (the rows a writer stopped by a full disk
+    had made room for but not written read as zeros)."""
     if "particles/all/position" not in f:
         raise RunFileError(f"{f.filename!r} has no /particles/all/position: not an H5MD particle file")
     counts = []
@@ -521,7 +558,11 @@ def frame_count(f: h5py.File) -> int:
             counts.extend(element[k].shape[0] for k in ("step", "time", "value"))
     if "contacts/offset" in f:
         counts.append(f["contacts/offset"].shape[0] - 1)
-    return min(counts)
+    count = min(counts)
+    if is_run_file(f) and count > 1:
+        back = np.flatnonzero(np.diff(f["particles/all/position/step"][:count]) < 0)
+        count = int(back[0]) + 1 if len(back) else count
+    return count
 
 
 def read_frame(f: h5py.File, index: int) -> dict:
