@@ -165,15 +165,12 @@ def _write(method):
             reason = found.group(1) if found else (getattr(error, "strerror", None) or str(error))
             kept = (f"granlab run --resume {str(self.path)!r} goes on from its last checkpoint (step "
                     f"{self.checkpoint_step})" if self.checkpoint_step is not None else "it holds no checkpoint yet")
-            self.failed = WriteFailed(f"writing {str(self.path)!r} failed at step {_step_of(args)}: {reason}. What "
-                                      f"was written before stays readable; {kept}")
+            step = getattr(args[0], "step", None) if args else None
+            at = f" at step {step}" if step is not None else ""
+            self.failed = WriteFailed(f"writing {str(self.path)!r} failed{at}: {reason}. What was written before "
+                                      f"stays readable; {kept}")
             raise self.failed from error
     return write
-
-
-def _step_of(args) -> str:
-    state = args[0] if args else None
-    return str(getattr(state, "step", "?"))
 
 
 class RunWriter:
