@@ -28,6 +28,7 @@ import json
 import os
 import re
 import struct
+import time
 import traceback
 import weakref
 from pathlib import Path
@@ -504,6 +505,10 @@ def raised_by_damage(error: BaseException) -> bool:
         "/h5py/" in frame.filename for frame in traceback.extract_tb(error.__traceback__))
 
 
+DAMAGE_SEARCH_SECONDS = 3.0
+"""How long :func:`damaged` looks back through a damaged file's frames for one that reads whole."""
+
+
 def damaged(path: str | Path, error: BaseException) -> RunFileError:
     """The error that names a damaged file: what went wrong, and for a run file the last frame and
     the checkpoint that can still be read (each found without a hang: see :func:`open_run`)."""
@@ -511,18 +516,22 @@ def damaged(path: str | Path, error: BaseException) -> RunFileError:
     kept = ""
     try:
         with open_run(path) as f:
-            count, last = frame_count(f), None
+            count, last, tried = frame_count(f), None, 0
+            give_up = time.monotonic() + DAMAGE_SEARCH_SECONDS
             for index in range(count - 1, -1, -1):
                 try:
                     last = read_frame(f, index)
                     break
                 except Exception:  # a damaged frame: the one before may be whole
-                    continue
+                    tried += 1
+                    if time.monotonic() > give_up:
+                        break
             try:
                 checkpoint = read_checkpoint(f)
             except Exception:
                 checkpoint = None
-        frames = f"frames up to {last['index']} (t = {last['time']:.6g}) read whole" if last else "no frame reads whole"
+        frames = (f"frames up to {last['index']} (t = {last['time']:.6g}) read whole" if last else
+                  "no frame reads whole" if tried == count else f"none of the last {tried} frames reads whole")
         resume = f"a checkpoint at step {int(checkpoint['step'])}" if checkpoint else "no checkpoint"
         kept = f"; {frames}, {resume}"
     except Exception:  # not even its layout reads
