@@ -36,7 +36,6 @@ from engine.errors import DivergenceError, GranLabError, ParameterError
 from engine.io.jsonsafe import jsonable
 from engine.io.outputs import free_name, occupied
 from engine.params import positive
-from engine.protocols.measures import pair_label
 from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
 from engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
 
@@ -483,7 +482,7 @@ class LabEngine:
             status = source.status()
             status.update(time=sim.time, step=sim.step, particles=sum(v.sim.particles.count for v in views),
                           dt=sim.dt, watched=[list(p) for p in source.watched()],
-                          watched_labels=[pair_label(p, sim.particles.count, sim.walls.names) for p in source.watched()])
+                          watched_labels=source.watched_labels())
         seconds = sum(r[3] for r in self._rate)
         span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
         simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0
@@ -537,18 +536,20 @@ class LabEngine:
         frames = list(self._history)
         if frames[-1][0].step != sim.step:
             frames.append((preset.snapshot(), settings_json(preset.settings), preset.phase()))
-        names = (sim.particles.count, sim.walls.names)
         protocol = {"lab_preset": preset.name, "settings": dataclasses.asdict(preset.settings),
                     "clock_unit": preset.clock_unit, "cycle_time": preset.cycle_time(),
                     "watched": [list(pair) for pair in preset.watched()], "changes": preset.changes,
-                    "watched_labels": [pair_label(pair, *names) for pair in preset.watched()],
+                    "watched_labels": preset.watched_labels(),
                     "views": [list(group) for group in _groups(preset.views())]}
         layout, checkpoint = preset.file_simulation()
         rows = {name_: buffer.array() for name_, buffer in self.buffers.items() if name_ in preset.series}
         cycles = _cycle_records(self.buffers["cycles"], sim) if "cycles" in preset.series else []
-        # a copy taken now: the job's thread pickles its arguments while this thread steps the run on
+        if checkpoint:
+            # the preset's own simulation, copied now: the job's thread pickles its arguments while
+            # this thread steps the run on
+            layout = copy.deepcopy(layout)
         self.jobs.start("save", f"saving {path.name}", write_run,
-                        (path, copy.deepcopy(layout), checkpoint, frames, jsonable(protocol), dict(preset.series), rows,
+                        (path, layout, checkpoint, frames, jsonable(protocol), dict(preset.series), rows,
                          cycles))
         self._info(f"saving {len(frames)} frames to {path.name}…", "save")
 
@@ -579,11 +580,8 @@ class LabEngine:
             raise ParameterError("record seconds", seconds,
                                  f"a span holding at least 2 kept frames (frames are kept every "
                                  f"{preset.cycle_time() / preset.settings.frames_per_cycle:.3g} of simulated time)")
-        sim = preset.views()[0].sim
-        watched = preset.watched()
-        labels = [pair_label(pair, sim.particles.count, sim.walls.names) for pair in watched]
         self.jobs.start("record", f"recording {path.name}", write_lab_movie,
-                        (path, frames, color, watched, labels, _groups(preset.views())))
+                        (path, frames, color, preset.watched(), preset.watched_labels(), _groups(preset.views())))
         self._info(f"recording {len(frames)} frames to {path.name}…", "record")
 
     def _job_done(self, outcome: JobOutcome) -> None:

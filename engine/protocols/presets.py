@@ -362,6 +362,11 @@ class Preset(ABC):
     def watched(self) -> list[tuple[int, int]]:
         return list(self.watch)
 
+    def watched_labels(self) -> list[str]:
+        """The watched contacts' names, as the lab, its saves and its movies show them."""
+        sim = self.views()[0].sim
+        return [pair_label(pair, sim.particles.count, sim.walls.names) for pair in self.watched()]
+
     def toggle_watch(self, pair: tuple[int, int]) -> str:
         """Watch (or stop watching) the contact ``pair`` = (i, j), ``j >= N`` for a wall; returns
         what happened, for the user. A pair that cannot exist is refused."""
