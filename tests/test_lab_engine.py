@@ -417,10 +417,10 @@ def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folde
     import imageio.v3 as iio
 
     wait(lambda: engine.status()["time"] > 12.0)
-    engine.submit("record", name="last-cycle.gif", seconds=10.0)  # 10 frames per cycle of T = 10
     seq = engine.messages.latest_seq
+    engine.submit("record", name="last-cycle.gif", seconds=10.0)  # 10 frames per cycle of T = 10
     engine.submit("record", name="by-pressure.gif", seconds=10.0, color="pressure")
-    wait(lambda: last_message(engine, seq))
+    wait(lambda: len(last_message(engine, seq)) == 2)
     assert "recording last-cycle.gif is still going" in last_message(engine, seq)[-1][1]  # one movie at a time
     wait(lambda: (tmp_path / "last-cycle.gif").exists(), timeout=120.0)
     wait(lambda: not engine.status()["jobs"])
