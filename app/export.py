@@ -35,7 +35,7 @@ from engine.errors import ParameterError
 from engine.io import h5md
 from engine.io.extxyz import write_xyz
 from engine.io.lammps import LOCAL_ITEM, write_dump
-from engine.io.outputs import check_output
+from engine.io.outputs import check_output, staged
 from engine.io.vtk import VTK_LINE, VTK_VERTEX, write_pvd, write_vtu
 
 from .drawing import cell_outline
@@ -111,13 +111,16 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
         targets = _targets(fmt, out, stem, indices)
         for target in targets:
             check_output(target, force=force, inputs=[path])
-        if fmt == "vtk":
-            out.mkdir(parents=True, exist_ok=True)
         walls = h5md.walls_from_json(h5md.parameters(f)["walls_json"])
         normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
         kind = f["particles/all/kind"][()] if "particles/all/kind" in f else None
         frames_read = (_Frame(h5md.read_frame(f, index), normals, kind) for index in indices)
-        WRITERS[fmt](frames_read, out, stem, indices)
+        if fmt == "vtk":
+            with staged(out, last=[targets[0].name]) as folder:
+                WRITERS[fmt](frames_read, folder, stem, indices)
+        else:
+            with staged(out.parent, last=[out.name]) as folder:
+                WRITERS[fmt](frames_read, folder / out.name, stem, indices)
     return {"run_file": str(path), "format": fmt, "out": str(out), "files": [str(t) for t in targets],
             "frames": len(indices), "indices": [indices[0], indices[-1]], "seconds": time.perf_counter() - start}
 

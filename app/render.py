@@ -33,7 +33,7 @@ from matplotlib.path import Path as StrokePath
 
 from engine.errors import ParameterError
 from engine.io import h5md
-from engine.io.outputs import check_output
+from engine.io.outputs import check_output, staged
 
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, LABEL_SIZE,
                       PRESSURE_LUT, ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS,
@@ -711,8 +711,9 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
         frames_read = run_frames(f, indices)
         if progress is not None:
             frames_read = _reporting(frames_read, len(indices), progress)
-        written = write_movie(frames_read, out, size, color_field, forces, fps, bounds, indices,
-                              _protocol(f).get("watched_labels", []))
+        with staged(out.parent, last=[out.name]) as folder:
+            written = write_movie(frames_read, folder / out.name, size, color_field, forces, fps, bounds, indices,
+                                  _protocol(f).get("watched_labels", []))
     return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,
             "indices": [indices[0], indices[-1]], "size": list(size), "color": color_field, "forces": forces,
             "fps": fps, "seconds_per_frame": (time.perf_counter() - start) / written}

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +18,7 @@ from engine.analysis.packing import packing_stats
 from engine.analysis.states import PackingState, StateReader, detect_format, read_state
 from engine.errors import GranLabError
 from engine.io import h5md
+from engine.io.outputs import staged
 from engine.protocols.presets import PRESETS, strain_fit
 
 from .frames import FrameData, build_frame
@@ -34,15 +33,6 @@ READ_SECONDS_PER_GIB = 120.0
 def read_time_limit(path: Path) -> float:
     """Seconds the reading of ``path`` may take before the lab gives up on it."""
     return 60.0 + READ_SECONDS_PER_GIB * path.stat().st_size / 2 ** 30
-
-
-def partial_file(path: Path) -> Path:
-    """A new hidden file beside ``path`` to write into before renaming it to ``path``: made
-    exclusively with a random name (a link planted in the data folder is never followed) and
-    ending in ``path``'s suffix (a movie's format follows it)."""
-    handle, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".part" + path.suffix)
-    os.close(handle)
-    return Path(name)
 
 
 def read_replay(report, path: Path) -> "Replay":
@@ -222,9 +212,8 @@ def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol:
     phase) triples, the lab's ``series`` (name -> columns) with their ``rows``, and the ``cycles``
     records of ``granlab info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was
     written, for the user."""
-    partial = partial_file(path)
-    try:
-        with h5md.RunWriter(partial, sim, protocol=protocol, lab_series=series, overwrite=True) as writer:
+    with staged(path.parent, last=[path.name]) as folder:  # a file appears in the list only once complete
+        with h5md.RunWriter(folder / path.name, sim, protocol=protocol, lab_series=series, overwrite=True) as writer:
             for k, (snap, settings, phase) in enumerate(frames):
                 writer.write_frame(snap, settings, phase)
                 report(0.95 * (k + 1) / len(frames))
@@ -234,9 +223,6 @@ def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol:
                 writer.write_cycle_record(*record)
             if checkpoint:
                 writer.write_checkpoint(sim)
-        partial.replace(path)  # a file appears in the list only once complete
-    finally:
-        partial.unlink(missing_ok=True)
     return f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) to {path.name}"
 
 
@@ -255,10 +241,6 @@ def write_lab_movie(report, path: Path, frames: list, color: str, watched: list,
             yield pair
             report((k + 1) / len(scenes))
 
-    partial = partial_file(path)
-    try:
-        count = write_movie(rendered(), partial, color_field=color, bounds=bounds, watched_labels=labels)
-        partial.replace(path)
-    finally:
-        partial.unlink(missing_ok=True)
+    with staged(path.parent, last=[path.name]) as folder:
+        count = write_movie(rendered(), folder / path.name, color_field=color, bounds=bounds, watched_labels=labels)
     return f"recorded {count} frames to {path.name}"

@@ -25,7 +25,7 @@ import numpy as np
 from .analysis.ratchet import RatchetVerdict, deviatoric_strain, ratchet_verdict
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
-from .io.outputs import check_output
+from .io.outputs import check_output, staged
 from .params import TANGENTIAL_MODELS, finite, nonnegative, positive
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import biaxial_law, compress
@@ -175,17 +175,17 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
         try:
             sim = model_sim(base, study, model)
             run_file = None
-            writer = None
-            if out_dir is not None:
-                run_file = str(sample_file(out_dir, model, seed))
+            if out_dir is None:
+                curve = cycle_sample(sim, study)
+            else:
+                run_file = check_output(sample_file(out_dir, model, seed), force=overwrite)
                 watch = touching_pairs(sim) if study.watch_samples else []
-                writer = RunWriter(run_file, sim, watch=watch, overwrite=overwrite,
-                                   protocol={"study": "ratchet", "seed": seed, "model": model, **study.__dict__})
-            try:
-                curve = cycle_sample(sim, study, writer)
-            finally:
-                if writer is not None:
-                    writer.close()
+                # the run file appears once whole: a killed study leaves no sample file it would refuse
+                with staged(run_file.parent, last=[run_file.name]) as folder, \
+                        RunWriter(folder / run_file.name, sim, watch=watch, protocol={
+                            "study": "ratchet", "seed": seed, "model": model, **study.__dict__}) as writer:
+                    curve = cycle_sample(sim, study, writer)
+                run_file = str(run_file)
             verdict = curve.verdict
             results.append({"seed": seed, "model": model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
                             "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,

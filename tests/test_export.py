@@ -204,3 +204,43 @@ def test_bad_exports_get_one_line_and_exit_2(run_file, tmp_path):
     lammps_dump.write_text("ITEM: TIMESTEP\n0\n")
     process = granlab("export", str(lammps_dump), "--format", "xyz", "--out", str(tmp_path / "y.xyz"), check=False)
     assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
+
+
+STALLED = """
+import sys, time
+from engine.io import h5md
+read = h5md.read_frame
+def stalled(f, index):
+    if index > 0:
+        print("stalled", flush=True)
+        time.sleep(600)
+    return read(f, index)
+h5md.read_frame = stalled
+from app.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("command, out, written", [
+    (("export", "--format", "vtk"), "paraview", ["paraview"]),
+    (("export", "--format", "xyz"), "frames.xyz", ["frames.xyz"]),
+    (("export", "--format", "lammps"), "frames.dump", ["frames.dump", "frames-contacts.dump"]),
+    (("export", "--format", "h5md"), "frames.h5md", ["frames.h5md"]),
+    (("render",), "movie.gif", ["movie.gif"]),
+    (("render",), "still.png", ["still_00000.png", "still_00001.png", "still_00002.png"]),
+])
+def test_a_killed_export_or_render_leaves_nothing_under_its_names_and_its_rerun_is_not_refused(
+        run_file, tmp_path, command, out, written):
+    args = [command[0], str(run_file), *command[1:], "--out", str(tmp_path / out), "--frames", ":"]
+    process = subprocess.Popen([sys.executable, "-c", STALLED, *args], stdout=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout.readline() == "stalled\n"  # its first frame written, the second never comes
+        process.kill()
+        process.wait(timeout=30)
+    finally:
+        process.kill()
+    assert not any((tmp_path / name).exists() for name in written)
+    granlab(*args)
+    assert all((tmp_path / name).exists() for name in written)
+    if command[0] == "export" and command[-1] == "vtk":
+        assert len(list((tmp_path / "paraview").iterdir())) == 1 + 3 * FRAMES

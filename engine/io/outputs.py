@@ -3,7 +3,12 @@ user says so (``--force``), and checked before any work starts."""
 
 from __future__ import annotations
 
+import os
+import secrets
+import shutil
 import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import OutputError
@@ -57,3 +62,38 @@ def check_output(path: str | Path, option: str = "--out", force: bool = False, i
         raise OutputError(f"{option} {str(path)!r} cannot be written: no file can be made in {str(existing)!r} "
                           f"({error.strerror or error})") from None
     return path
+
+
+@contextmanager
+def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
+    """A new hidden folder to write a command's files into, moved into ``folder`` (made if
+    missing) once the block ends without error: the hidden folder renamed to ``folder`` if that
+    did not exist, else file by file, those named in ``last`` last (the file that lists the
+    others, the one a reader opens first). On an error the files are removed; a killed command
+    leaves a hidden ``.NAME.*.part`` folder (NAME the first of ``last``, else ``folder``'s) and
+    nothing under the names it was writing."""
+    folder = Path(folder).absolute()
+    new = not occupied(folder)
+    home = folder.parent if new else folder
+    home.mkdir(parents=True, exist_ok=True)
+    while True:
+        # made here, not by mkdtemp, so that the folder renamed into place has the user's
+        # usual permissions (mkdtemp's are 0700)
+        stage = home / f".{last[0] if last else folder.name}.{secrets.token_hex(4)}.part"
+        try:
+            stage.mkdir()
+            break
+        except FileExistsError:
+            continue
+    try:
+        yield stage
+        if new:
+            stage.rename(folder)
+        else:
+            written = os.listdir(stage)
+            names = [name for name in written if name not in last] + [name for name in last if name in written]
+            for name in names:
+                os.replace(stage / name, folder / name)
+            stage.rmdir()
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
