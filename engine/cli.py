@@ -466,18 +466,24 @@ def _print_info(result: dict) -> None:
         print(f"  protocol: {json.dumps(jsonable(result['protocol']))}")
 
 
+LAW_OPTIONS = {"friction": ("--mu", "mu"), "normal_stiffness": ("--kn", "K_n"),
+               "tangential_stiffness": ("--kt", "K_t")}
+"""The contact law's values ``analyze`` takes from its options when a file carries none: option, symbol."""
+
+
 def _analyze(args) -> dict:
     from .analysis.report import analyze
     from .analysis.states import read_state
 
-    given = {name: value for name, value in (("friction", args.mu), ("normal_stiffness", args.kn),
-                                             ("tangential_stiffness", args.kt)) if value is not None}
+    given = {key: getattr(args, option[2:]) for key, (option, _) in LAW_OPTIONS.items()
+             if getattr(args, option[2:]) is not None}
     columns = tuple(args.contact_columns.replace(",", " ").split()) if args.contact_columns else None
     state = read_state(args.runfile, args.frame, law=given, contacts=args.contacts, contact_columns=columns)
     result = analyze(state, args.analysis, load=args.load, seed=args.seed).as_dict()
     result.update(run_file=args.runfile, source=state.source, particles=state.disks, forces_known=state.forces_known,
                   law={"friction": state.law.friction, "normal_stiffness": state.law.normal_stiffness,
-                       "tangential_stiffness": state.law.tangential_stiffness, "given": state.law_given})
+                       "tangential_stiffness": state.law.tangential_stiffness,
+                       "assumed": [] if state.law_given else [key for key in LAW_OPTIONS if key not in given]})
     return result
 
 
@@ -487,9 +493,12 @@ def _print_analysis(result) -> None:
     print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
           + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
     law = result["law"]
-    if not law["given"]:
-        print(f"  contact law assumed, the file carries none: mu = {law['friction']:g}, K_n = "
-              f"{law['normal_stiffness']:g}, K_t = {law['tangential_stiffness']:g} (--mu, --kn, --kt)")
+    if law["assumed"]:
+        values = {key: f"{LAW_OPTIONS[key][1]} = {law[key]:g}" for key in LAW_OPTIONS}
+        given = [values[key] for key in LAW_OPTIONS if key not in law["assumed"]]
+        print("  contact law assumed, the file carries none: "
+              + ", ".join(f"{values[key]} ({LAW_OPTIONS[key][0]})" for key in law["assumed"])
+              + (f"; given: {', '.join(given)}" if given else ""))
     rows = result.report.rows()
     width = max((len(row.label) for row in rows), default=0) + 1
     for row in rows:

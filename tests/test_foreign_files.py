@@ -120,10 +120,15 @@ def test_granlab_analyze_reads_a_lammps_packing_with_its_contacts_and_law():
                                 "--kn", "1000", "--kt", "285.714", "--json").stdout)
     assert result["forces_known"] and result["particles"] == 200
     assert result["law"] == {"friction": 0.5, "normal_stiffness": 1000.0, "tangential_stiffness": 285.714,
-                             "given": False}
+                             "assumed": []}
     assert result["agrees_with_dynamics"] is True
-    text = granlab("analyze", str(PACKING), "packing", "--contacts", str(CONTACTS)).stdout
-    assert "timestep" in text and "Contact forces known" in text and "contact law assumed" in text
+    text = granlab("analyze", str(PACKING), "packing", "--contacts", str(CONTACTS), "--mu", "0.5").stdout
+    assert "timestep" in text and "Contact forces known" in text
+    assert ("contact law assumed, the file carries none: K_n = 1000 (--kn), K_t = 1000 (--kt); given: mu = 0.5"
+            in text)
+    text = granlab("analyze", str(PACKING), "packing", "--contacts", str(CONTACTS), "--mu", "0.5", "--kn", "1000",
+                   "--kt", "285.714").stdout
+    assert "assumed" not in text  # was "contact law assumed" with all three given
 
 
 def lines(path):
