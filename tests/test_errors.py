@@ -153,6 +153,11 @@ def test_scene_errors_name_the_key_and_what_is_allowed():
             "rows × columns = 1000000000000 is not allowed: at most 4000000 disks",
         base.replace("steps = 10", "steps = 10\nthreads = 1000"): "simulation.threads = 1000 is not allowed: at most",
         "title = 5\n" + base: "scene.title = 5 is not allowed: a string",
+        base + "[cell]\nlengths = [10, 10]\nstrain_rate = [0.01, 0.01]\n":  # was run as a fixed cell
+            "cell.strain_rate = [0.01, 0.01] is not allowed with cell.control = ['fixed', 'fixed']: the cell would "
+            "ignore it; give cell.control = ['strain-rate', 'strain-rate']",
+        base + "[cell]\nlengths = [10, 10]\ncontrol = ['stress', 'fixed']\nstress = [1, 1]\n":
+            "give cell.control = ['stress', 'stress'], or stress 0 on the axes not under stress control",
     }
     for text, expected in cases.items():
         with pytest.raises(SceneError) as error:

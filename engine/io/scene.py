@@ -246,9 +246,19 @@ def _cell(table) -> PeriodicCell:
     control = table.get("control")
     if control is not None and (not isinstance(control, list) or len(control) != 2):
         raise SceneError(f"cell.control = {control!r} is not allowed: two of fixed, stress, strain-rate")
+    stress, strain_rate = _vector(table, "stress", "cell"), _vector(table, "strain_rate", "cell")
+    for key, target, mode in (("stress", stress, "stress"), ("strain_rate", strain_rate, "strain-rate")):
+        # a target on an axis not under its control would be ignored without a word
+        idle = [axis for axis in range(2) if target is not None and target[axis] != 0.0
+                and (control is None or control[axis] != mode)]
+        if idle:
+            wanted = [mode if axis in idle else (control[axis] if control else "fixed") for axis in range(2)]
+            raise SceneError(f"cell.{key} = {list(target)!r} is not allowed with cell.control = "
+                             f"{list(control) if control else ['fixed', 'fixed']!r}: the cell would ignore it; "
+                             f"give cell.control = {wanted!r}, or {key} 0 on the axes not under {mode} control")
     return _build("cell", PeriodicCell, lengths=_vector(table, "lengths", "cell"),
                   periodic=tuple(periodic) if periodic else None, control=tuple(control) if control else None,
-                  stress=_vector(table, "stress", "cell"), strain_rate=_vector(table, "strain_rate", "cell"),
+                  stress=stress, strain_rate=strain_rate,
                   mass=_number(table, "mass", "cell"), max_strain_rate=_number(table, "max_strain_rate", "cell"))
 
 
