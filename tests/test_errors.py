@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from engine import (ContactLaw, DivergenceError, Integration, ParameterError, ParticleState, SceneError,
-                    Simulation, box_walls)
+                    Simulation, Wall, box_walls)
 from engine.io.scene import parse_scene
 
 
@@ -102,6 +102,20 @@ def test_overlap_divergence_stops_and_keeps_last_good_state():
     assert sim.time > good_time
 
 
+def test_a_fast_disk_with_nothing_in_reach_flies_on_until_something_is():
+    """A disk moving 20 radii a step, 2000 radii from the only other disk and the walls, is no
+    tunnelling risk (was stopped at once); heading for a wall it is stopped before it reaches it."""
+    wall = Wall(normal=(-1.0, 0.0), position=-3000.0, name="right")
+    particles = ParticleState([[0.0, 0.0], [-2000.0, 0.0]], [0.5, 0.5], velocity=[[-1e4, 0.0], [0.0, 0.0]])
+    sim = Simulation(particles, ContactLaw(), Integration(dt=1e-3), walls=(wall,))
+    sim.run(50)  # 500 of its 2000 radii to the other disk
+    assert sim.particles.position[0, 0] == pytest.approx(-500.0)
+    sim.particles.velocity[0] = (1e4, 0.0)
+    with pytest.raises(DivergenceError, match="disk 0 moved 20 of its radius in one step"):
+        sim.run(1000)
+    assert 2999.5 - sim.particles.position[0, 0] > 40.0  # stopped short of the wall, nothing passed
+
+
 @pytest.mark.parametrize("block", [1, 1000])
 def test_a_disk_that_would_tunnel_through_another_stops_the_run_naming_it(block):
     """Two disks head-on at +-1e4 with dt = 1e-3 move 20 radii a step: without the check they
@@ -114,7 +128,9 @@ def test_a_disk_that_would_tunnel_through_another_stops_the_run_naming_it(block)
     assert error.value.reason == ("disk 0 moved 20 of its radius in one step (speed 1e+04, dt = 0.001), above "
                                   "max_overlap / 2 = 0.25: it could pass through a neighbour (time step too large "
                                   "for this speed)")
-    np.testing.assert_array_equal(sim.particles.position, [[-50.0, 0.0], [50.0, 0.0]])
+    # they flew free while more than 40 apart (twice their moves); the step that brought them in
+    # reach of each other is undone
+    assert sim.particles.position[1, 0] - sim.particles.position[0, 0] - 1.0 == 59.0
     slow = Simulation(ParticleState([[-1.0, 0.0], [1.0, 0.0]], [0.5, 0.5], velocity=[[1.0, 0.0], [-1.0, 0.0]]),
                       ContactLaw(), Integration(dt=1e-3))
     slow.run(2000)  # 0.002 of a radius a step: they collide and bounce
