@@ -143,7 +143,8 @@ def _print_run(result: dict) -> None:
     first = result["series"]["balance"][0]
     drift = energy["balance"] - first
     scale = max(abs(first), 1e-300)
-    order = "first order in dt: LAMMPS's half-step dashpots" if result["first_order"] else "second order in dt"
+    order = ("falls as dt: LAMMPS's half-step dashpots" if result["first_order"]
+             else "falls faster than dt: as dt^1.5 to dt^3 in oblique collisions")
     print(f"  energy balance: {energy['balance']:.6g} (drift {drift:.3g}, {drift / scale:.2e} relative; {order})")
     if result["run_file"]:
         print(f"  run file: {result['run_file']}")

@@ -24,8 +24,9 @@ class TangentialModel:
     whether its tangential force and spring rate carry ``alpha = (r_i + r_j) / |x_i - x_j|``
     (ratcheting Eqs. 23-25, 30; the angle spring's force does too); whether a closed path leaves
     it the residue a / (r_i + r_j) of ratcheting Eq. 17 (``path_dependent``); and whether its
-    dashpots take the velocities predicted at the whole step, second order in dt
-    (``whole_step_dashpots``), or the half-step ones, first order (LAMMPS's integration)."""
+    dashpots take the velocities predicted at the whole step, the energy balance's error then
+    falling faster than dt (``whole_step_dashpots``), or the half-step ones, as dt (LAMMPS's
+    integration)."""
 
     name: str
     code: int
