@@ -202,6 +202,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     # without a dashpot the dashpots' velocities multiply zero: the half-step ones serve, unread
     whole_step = tangential.whole_step_dashpots(tangential_model) and (
         eta_factor > 0.0 or gamma_t > 0.0 or gamma_r_factor > 0.0)
+    # LAMMPS's model (the only one with half-step dashpots) puts its dashpot inside the Coulomb limit
+    dashpot_in_limit = not tangential.whole_step_dashpots(tangential_model)
 
     lo = uint64(c * count // n_chunks)
     hi = uint64((c + 1) * count // n_chunks)
@@ -318,7 +320,15 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             rate_d = tangential.spring_rate(tangential_model, vt_d, spin_d, alpha)
             spring, ft, state, slip = tangential.limit(tangential_model, kt, mu, gamma_t, ne, fn, trial, rate_d)
             # the viscous part of F_t, F_t + K_t D_t, does work (zero while a GranLab spring slides)
-            damping -= (ft + kt * spring) * rate_d * dt
+            viscous_work = -(ft + kt * spring) * rate_d * dt
+            if not dashpot_in_limit:
+                damping += viscous_work
+            else:
+                # LAMMPS limits the dashpot's force with the spring's and rescales the two together,
+                # which can load the spring as it slides, and a contact can chatter between sticking
+                # and sliding: split, either tally could go negative; as one, only by what the
+                # rescale itself creates
+                sliding += viscous_work
             if state != STATUS_STICK:
                 # the elastic force of the step before and of this one, averaged as velocity
                 # Verlet averages them in the kinetic energy: first-order errors cancel
