@@ -179,9 +179,9 @@ def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, cap
     for analysis in ("stiffness", "status", "rigidity", "packing", "fractal"):
         assert cli.main(["analyze", str(out), analysis]) == 2
         error = capsys.readouterr().err
-        assert error == (f"granlab analyze: error: {out} frame {frames - 1} has non-finite positions or radii "
-                         "(disk 1 of 2): the run had diverged when it was written; analyse an earlier frame "
-                         "(--frame)\n"), analysis
+        assert error == (f"granlab analyze: error: {out} frame {frames - 1} has non-finite or huge (> 1e150) "
+                         "positions or radii, or radii not > 0 (disk 1 of 2): a run that diverged writes NaN; "
+                         "analyse an earlier frame (--frame)\n"), analysis
     assert cli.main(["analyze", str(out), "packing", "--frame", "0"]) == 0
 
 

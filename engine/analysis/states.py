@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -205,16 +206,30 @@ def _h5md_state(path: str | Path, frame: int, gap: float) -> PackingState:
 
 
 def _check_finite(state: PackingState) -> None:
-    """A frame written as a run diverged holds NaN or infinite values: every analysis of it would
-    be meaningless (a singular stiffness matrix, numbers from NaN), so it is refused by name."""
-    bad = np.flatnonzero(~np.all(np.isfinite(state.positions), axis=1) | ~(np.isfinite(state.radii) & (state.radii > 0)))
+    _refuse_non_finite(state.source, state.positions, state.radii, np.concatenate([state.box_lengths,
+                                                                                   state.cell_lengths]))
+
+
+DECLARED_SIZE_FACTOR = 64
+"""A foreign H5MD dataset may declare at most this many times its file's size (compression of
+floating-point positions gains far less): a larger one is damaged, and reading it would exhaust memory."""
+HUGE = 1e150
+"""Values beyond this overflow when squared: refused with the non-finite ones."""
+
+
+def _refuse_non_finite(source: str, positions: np.ndarray, radii: np.ndarray, lengths: np.ndarray) -> None:
+    """NaN or infinite values (a run that diverged writes them; so does a careless edit) would make
+    every analysis meaningless (a singular stiffness matrix, numbers from NaN): refused by name,
+    before any geometry is built from them."""
+    bad = np.flatnonzero(~np.all(np.abs(positions) < HUGE, axis=1) | ~((radii < HUGE) & (radii > 0)))
     if bad.size:
         shown = ", ".join(str(i) for i in bad[:5]) + (f" and {bad.size - 5} more" if bad.size > 5 else "")
-        raise RunFileError(f"{state.source} has non-finite positions or radii (disk {shown} of {state.disks}): "
-                           "the run had diverged when it was written; analyse an earlier frame (--frame)")
-    if not (np.all(np.isfinite(state.box_lengths)) and np.all(np.isfinite(state.cell_lengths))):
-        raise RunFileError(f"{state.source} has a non-finite box: the run had diverged when it was written; "
-                           "analyse an earlier frame (--frame)")
+        raise RunFileError(f"{source} has non-finite or huge (> 1e150) positions or radii, or radii not > 0 (disk "
+                           f"{shown} of {positions.shape[0]}): a run that diverged writes NaN; analyse an earlier "
+                           f"frame (--frame)")
+    if not np.all(np.abs(lengths) < HUGE):
+        raise RunFileError(f"{source} has a non-finite or huge box ({np.asarray(lengths).tolist()}): a run that diverged "
+                           f"writes NaN; analyse an earlier frame (--frame)")
 
 
 def _granlab_state(f: h5py.File, index: int, path: str) -> PackingState:
@@ -253,10 +268,18 @@ def _particle_group(f: h5py.File, path: str) -> h5py.Group:
 
 
 def _element(group: h5py.Group, name: str, index: int, frames: int):
-    """Frame ``index`` of an H5MD element: a time-dependent group (``value``) or a fixed dataset."""
+    """Frame ``index`` of an H5MD element: a time-dependent group (``value``) or a fixed dataset,
+    its declared size checked against the file's first."""
     element = group[name]
+    values = element["value"] if isinstance(element, h5py.Group) else element
+    per_frame = values.size // max(values.shape[0], 1) if isinstance(element, h5py.Group) else values.size
+    declared = per_frame * values.dtype.itemsize
+    size = os.path.getsize(group.file.filename)
+    if declared > DECLARED_SIZE_FACTOR * size + 2 ** 20:
+        raise RunFileError(f"{group.file.filename!r}: {values.name} declares shape {values.shape}, "
+                           f"{declared / 2 ** 20:.4g} MiB a frame, in a file of {size / 2 ** 20:.4g} MiB: damaged or "
+                           f"not what it says (at most {DECLARED_SIZE_FACTOR} times the file's size is read)")
     if isinstance(element, h5py.Group):
-        values = element["value"]
         return values[index] if values.shape[0] == frames else values[-1]
     return element[()]
 
@@ -291,12 +314,17 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
         raise RunFileError(f"{path!r} has no radius or diameter element in {group.name}: disk sizes are needed")
     if positions.shape[0] == 0:
         raise RunFileError(f"frame {index} of {path!r} holds no disks: nothing to analyse")
+    if radii.shape not in ((), (1,), positions.shape[:1]):
+        raise RunFileError(f"{path!r}: {radii.size} radii for {positions.shape[0]} positions; one per disk (or one "
+                           f"for all) is needed")
     radii = np.broadcast_to(radii, positions.shape[:1]).astype(float)
     edges = np.asarray(_element(box, "edges", index, frames), dtype=float)
     if edges.shape == (dimension, dimension):
         if np.count_nonzero(edges - np.diag(np.diag(edges))):
             raise RunFileError(f"{path!r}: the box is triclinic; only rectangular boxes can be analysed")
         edges = np.diag(edges).copy()
+    if edges.shape == (dimension,):
+        _refuse_non_finite(source, positions, radii, edges)
     if edges.shape != (dimension,) or not np.all(edges[:2] > 0):
         raise RunFileError(f"{path!r}: box edges {edges.tolist()} are not {dimension} lengths, the first two positive")
     boundary = [b.decode() if isinstance(b, bytes) else str(b)
@@ -342,6 +370,7 @@ def _xyz_state(data: XYZFrame, path: str | Path, law: dict, gap: float) -> Packi
         raise RunFileError(f"{source}: the Lattice's x and y lengths {lengths.tolist()} are not positive: a cell "
                            f"(Lattice=\"Lx 0 0 0 Ly 0 0 0 Lz\") is needed")
     radii = _sizes(data.arrays, source, "column (Properties=...:radius:R:1)")
+    _refuse_non_finite(source, data.positions, radii, lengths)
     positions = _planar(data.positions, radii, source)
     periodic = data.pbc[:2]
     contacts = geometric_contacts(positions, radii, lengths, periodic, gap)
@@ -387,8 +416,9 @@ def _lammps_state(dump: Dump, frame: int, law: dict, gap: float, contacts: Dump 
         values = columns[found][order]
         axes.append(lower[k] + values * (upper[k] - lower[k]) if "s" in found else values)
     radii = _sizes(columns, source, "column (dump custom ... radius)")[order]
-    positions = _planar(np.column_stack(axes), radii, source) - lower[:2]
     lengths = (upper - lower)[:2]
+    _refuse_non_finite(source, np.column_stack(axes), radii, np.concatenate([lower, upper]))
+    positions = _planar(np.column_stack(axes), radii, source) - lower[:2]
     if not np.all(lengths > 0):
         raise RunFileError(f"{source}: the box's x and y lengths {lengths.tolist()} are not positive")
     periodic = data.periodic[:2]
@@ -447,6 +477,11 @@ def lammps_contacts(dump: Dump, timestep: int, ids: np.ndarray, positions: np.nd
     force = np.column_stack([meaning["fx"], meaning["fy"]])
     if "ftx" in meaning and "fty" in meaning:
         force = force + np.column_stack([meaning["ftx"], meaning["fty"]])
+    bad = np.flatnonzero(~np.all(np.abs(force) < HUGE, axis=1))
+    if bad.size:
+        raise RunFileError(f"{source} has non-finite or huge (> 1e150) forces in {bad.size} of its {force.shape[0]} "
+                           f"entries (the first between atoms {first[bad[0]]} and {second[bad[0]]}): forces must be "
+                           f"finite numbers")
     wrap = np.array(periodic)
     delta = positions[i] - positions[j]
     image = np.where(wrap, np.round(delta / lengths), 0.0)
