@@ -473,6 +473,7 @@ LAW_OPTIONS = {"friction": ("--mu", "mu"), "normal_stiffness": ("--kn", "K_n"),
 
 
 def _analyze(args) -> dict:
+    from .analysis.plausibility import implausible
     from .analysis.report import analyze
     from .analysis.states import read_state
 
@@ -480,11 +481,15 @@ def _analyze(args) -> dict:
              if getattr(args, option[2:]) is not None}
     columns = tuple(args.contact_columns.replace(",", " ").split()) if args.contact_columns else None
     state = read_state(args.runfile, args.frame, law=given, contacts=args.contacts, contact_columns=columns)
+    warnings = implausible(state)
+    for warning in warnings:  # before the work: a wrong reading is told at once
+        print(f"granlab analyze: warning: {warning}", file=sys.stderr, flush=True)
     result = analyze(state, args.analysis, load=args.load, seed=args.seed).as_dict()
     result.update(run_file=args.runfile, source=state.source, particles=state.disks, forces_known=state.forces_known,
                   law={"friction": state.law.friction, "normal_stiffness": state.law.normal_stiffness,
                        "tangential_stiffness": state.law.tangential_stiffness,
-                       "assumed": [] if state.law_given else [key for key in LAW_OPTIONS if key not in given]})
+                       "assumed": [] if state.law_given else [key for key in LAW_OPTIONS if key not in given]},
+                  warnings=warnings)
     return result
 
 

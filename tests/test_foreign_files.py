@@ -212,3 +212,40 @@ def test_contact_columns_name_the_columns_of_an_unnamed_pair_local_dump(tmp_path
     np.testing.assert_array_equal(named.contacts.tangential_force, given.contacts.tangential_force)
     with pytest.raises(Exception, match="has no id1, id2, fx, fy column"):
         read_state(PACKING, contacts=unnamed)
+
+
+def test_a_file_that_reads_but_is_no_packing_is_said_so_with_its_likely_cause(tmp_path):
+    """Each gave numbers without a word before: z = 0 (NaN z* in --json), phi = 46.6 and z = 121,
+    disks 0.4 to 1.4 mean forces out of balance."""
+    header = next(line for line in lines(PACKING) if line.startswith("ITEM: ATOMS"))
+    names = header.split()[2:]
+    x, radius = names.index("x"), names.index("radius")
+
+    def swapped(line):
+        words = line.split()
+        if len(words) != len(names) or line.startswith("ITEM"):
+            return line
+        words[x], words[radius] = words[radius], words[x]
+        return " ".join(words) + "\n"
+
+    diameter, swap, normal_only = tmp_path / "diameter.dump", tmp_path / "swap.dump", tmp_path / "normal.dump"
+    diameter.write_text("".join(lines(PACKING)).replace(" radius ", " diameter "))
+    swap.write_text("".join(swapped(line) for line in lines(PACKING)))
+    local_names = next(line for line in lines(CONTACTS) if line.startswith("ITEM: ENTRIES")).split()[2:]
+    keep = [k for k, name in enumerate(local_names) if name not in ("ftx", "fty", "ftz")]
+    normal_only.write_text("".join(
+        "ITEM: ENTRIES " + " ".join(local_names[k] for k in keep) + "\n" if line.startswith("ITEM: ENTRIES")
+        else " ".join(line.split()[k] for k in keep) + "\n" if len(line.split()) == len(local_names) else line
+        for line in lines(CONTACTS)))
+    cases = [((str(diameter),), "no two disks touch, so the coordination number means nothing: are the sizes radii "
+                                "under a diameter's name"),
+             ((str(swap),), "above 1: the disks are larger than their box; is another column read as the radius"),
+             ((str(PACKING), "--contacts", str(normal_only)), "the contact forces do not balance: ")]
+    for args, warning in cases:
+        process = granlab("analyze", *args, "packing", "--json")
+        assert warning in process.stderr and process.stderr.startswith("granlab analyze: warning: "), process.stderr
+        assert json.loads(process.stdout)["warnings"]
+    assert "dump the tangential ones too" in process.stderr
+    for args in ((str(PACKING),), (str(XYZ),), (str(PACKING), "--contacts", str(CONTACTS))):
+        process = granlab("analyze", *args, "packing", "--json")
+        assert process.stderr == "" and json.loads(process.stdout)["warnings"] == []

@@ -2,7 +2,8 @@
 truncations, flipped bytes, zeroed pages, deleted or repeated lines, swapped or renamed columns,
 huge counts and shapes, NaN, inf and huge values, negative radii, duplicate ids, junk) read by
 ``granlab analyze`` (:mod:`tests.foreign_fuzz`): each ends within its deadline in a one-line error
-(exit 2) or a result, never in a traceback, a hang or a memory limit. Before this check 31 of the
+(exit 2) or a result, never in a traceback, a hang or a memory limit, and a result that is not a
+packing is said not to be one (:mod:`engine.analysis.plausibility`). Before this check 31 of the
 420 ended in a traceback (4 of them allocating 8.9 GiB for a declared shape) or printed warnings
 before their message."""
 
@@ -27,3 +28,11 @@ def test_mutated_foreign_files_end_in_one_line_or_a_result(tmp_path):
     errors = [r for r in results if r["code"] == 2]
     assert all(line.startswith("granlab analyze: error: ") for r in errors for line in r["stderr"])
     assert 100 < len(errors) < 400  # the corpus both breaks files and leaves some readable
+    read = [r for r in results if r["code"] == 0]
+    assert all(line.startswith("granlab analyze: warning: ") for r in read for line in r["stderr"])
+    # what reads is the packing (phi 0.841, z 3.6 in the unmutated files) or is said not to be one:
+    # phi = 1.7e58 from a radius of 1e30, z = 28 from a zeroed page were shown without a word
+    silent = [(r["name"], r["report"]["phi"], r["report"]["z"]) for r in read if not r["report"]["warnings"]
+              and not (0.80 < r["report"]["phi"] < 0.87 and 3.0 < r["report"]["z"] < 4.5)]
+    assert not silent, silent
+    assert sum(bool(r["report"]["warnings"]) for r in read) >= 10

@@ -534,7 +534,11 @@ def geometric_contacts(positions: np.ndarray, radii: np.ndarray, lengths: np.nda
     pairs = tree.query_pairs(2.0 * float(radii.max(initial=0.0)) + tolerance, output_type="ndarray")
     i, j = pairs[:, 0], pairs[:, 1]
     delta = positions[i] - positions[j]
-    image = np.where(wrap, np.round(delta / lengths), 0.0)
+    extent = np.ptp(positions, axis=0) if positions.size else np.zeros(2)
+    if np.any(wrap & (extent > 1e9 * lengths)):
+        raise RunFileError(f"the periodic box {lengths.tolist()} is too small for positions spread over "
+                           f"{extent.tolist()}: its lengths or the positions are wrong")
+    image = np.where(wrap, np.round(delta / np.where(wrap, lengths, 1.0)), 0.0)
     branch = delta - image * lengths
     surface = np.hypot(branch[:, 0], branch[:, 1]) - radii[i] - radii[j]
     keep = surface <= tolerance
