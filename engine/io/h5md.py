@@ -22,11 +22,13 @@ checkpoint, so a run killed at any moment leaves a file readable up to its last 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import fcntl
 import functools
 import json
 import os
 import re
+import resource
 import struct
 import time
 import traceback
@@ -152,6 +154,11 @@ def cell_from_json(text: str) -> PeriodicCell | None:
     return PeriodicCell(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
+def _reserve(sim: Simulation) -> int:
+    """Bytes a frame and a checkpoint of ``sim`` may take on disk, HDF5's chunks and metadata included."""
+    return 2 * sum(value.nbytes for value in sim.export_state().values()) + 2 ** 19
+
+
 def _write(method):
     """A write of a :class:`RunWriter`: an OS error ends the writer with :class:`WriteFailed`, and
     no later call touches its file."""
@@ -160,6 +167,9 @@ def _write(method):
         if self.failed is not None:
             raise self.failed
         try:
+            short = self._short_of_room()
+            if short:
+                raise OSError(errno.ENOSPC, short)
             return method(self, *args, **kwargs)
         except (OSError, RuntimeError) as error:
             found = re.search(r"error message = '([^']*)'", str(error))
@@ -248,6 +258,7 @@ class RunWriter:
                     np.array(columns, dtype="S32")
         self._write_parameters(f.create_group("parameters"), sim, scene, protocol)
         self._create_checkpoint(f.create_group("checkpoint"), sim)
+        self.reserve = _reserve(sim)
         f.swmr_mode = True
         self.failed: WriteFailed | None = None
         self.checkpoint_step: int | None = None
@@ -414,6 +425,21 @@ class RunWriter:
         group["valid"][...] = [slot, sim.step]
         self.file.flush()
         self.checkpoint_step = sim.step
+        self.reserve = _reserve(sim)  # the contacts may have grown
+
+    def _short_of_room(self) -> str | None:
+        """Why the next write may not fit, or None: HDF5 fails a write that runs out of room while
+        it releases a dataset, where no caller can catch it, and then crashes; so a write is
+        started only with room for a whole checkpoint and its frame (``reserve``) to spare."""
+        free = os.statvfs(self.path.parent)
+        room = free.f_bavail * free.f_frsize
+        if room < self.reserve:
+            return f"No space left on device ({room / 2 ** 20:.3g} MiB free, a frame and a checkpoint need " \
+                   f"{self.reserve / 2 ** 20:.3g} MiB)"
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if limit != resource.RLIM_INFINITY and os.path.getsize(self.path) + self.reserve > limit:
+            return f"File too large (the file size limit, ulimit -f, is {limit / 2 ** 20:.3g} MiB)"
+        return None
 
     def close(self) -> None:
         if self.failed is None and self.file.id.valid:
