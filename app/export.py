@@ -31,11 +31,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from engine.errors import ParameterError
+from engine.errors import OutputError, ParameterError
 from engine.io import h5md
 from engine.io.extxyz import write_xyz
 from engine.io.lammps import LOCAL_ITEM, write_dump
-from engine.io.outputs import check_output, staged
+from engine.io.outputs import check_output, room_for_one_file, staged
 from engine.io.vtk import VTK_LINE, VTK_VERTEX, write_pvd, write_vtu
 
 from .drawing import cell_outline
@@ -115,6 +115,13 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
         normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
         kind = f["particles/all/kind"][()] if "particles/all/kind" in f else None
         frames_read = (_Frame(h5md.read_frame(f, index), normals, kind) for index in indices)
+        if fmt == "h5md":
+            # HDF5 crashes on a write that fails inside it: the room is checked first
+            needed = len(indices) * f["particles/all/position/value"][0].nbytes * 3 + 2 ** 20
+            room = room_for_one_file(out.parent)
+            if room < needed:
+                raise OutputError(f"writing {str(out)!r} needs about {needed / 2 ** 20:.3g} MiB and there is room "
+                                  f"for {room / 2 ** 20:.3g} MiB (free space, ulimit -f): nothing was written")
         if fmt == "vtk":
             with staged(out, last=[targets[0].name]) as folder:
                 WRITERS[fmt](frames_read, folder, stem, indices)

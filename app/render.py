@@ -31,7 +31,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, PathPatch, Rectangle
 from matplotlib.path import Path as StrokePath
 
-from engine.errors import ParameterError
+from engine.errors import OutputError, ParameterError
 from engine.io import h5md
 from engine.io.outputs import check_output, staged
 
@@ -589,27 +589,27 @@ def write_movie(frames: Iterable[tuple[SceneFrame, str]], out: Path, size=(1280,
 
 
 def _write_pngs(images: Iterator[np.ndarray], out: Path, numbers: Iterator[int]) -> int:
-    import imageio.v3 as iio
+    from PIL import Image
 
+    # Pillow itself, as for GIFs
     first = next(images)
     second = next(images, None)
     if second is None:
-        iio.imwrite(out, first)
+        Image.fromarray(first).save(out)
         return 1
     count = 0
     for count, image in enumerate(itertools.chain([first, second], images), 1):
-        iio.imwrite(png_name(out, next(numbers)), image)
+        Image.fromarray(image).save(png_name(out, next(numbers)))
     return count
 
 
 def _write_gif(images: Iterator[np.ndarray], out: Path, fps: float) -> int:
-    import imageio.v3 as iio
+    from PIL import Image
 
-    count = 0
-    with iio.imopen(out, "w", plugin="pillow") as gif:
-        for count, image in enumerate(images, 1):
-            gif.write(image, duration=1000.0 / fps, loop=0)
-    return count
+    # Pillow itself (not through imageio, whose writer retries a failed write when collected)
+    frames = [Image.fromarray(image) for image in images]
+    frames[0].save(out, save_all=True, append_images=frames[1:], duration=1000.0 / fps, loop=0)
+    return len(frames)
 
 
 def _write_mp4(images: Iterator[np.ndarray], out: Path, size: tuple[int, int], fps: float) -> int:
@@ -618,7 +618,7 @@ def _write_mp4(images: Iterator[np.ndarray], out: Path, size: tuple[int, int], f
     # macro_block_size 2: yuv420p's own constraint; imageio-ffmpeg's default of 16 would
     # resize 1920x1080 to 1920x1088.
     writer = imageio_ffmpeg.write_frames(str(out), size, fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                                         quality=None, macro_block_size=2, ffmpeg_log_level="error",
+                                         quality=None, macro_block_size=2, ffmpeg_log_level="quiet",
                                          output_params=["-crf", "18", "-movflags", "+faststart"])
     writer.send(None)
     count = 0
@@ -627,6 +627,15 @@ def _write_mp4(images: Iterator[np.ndarray], out: Path, size: tuple[int, int], f
             writer.send(np.ascontiguousarray(image))
     finally:
         writer.close()
+    # ffmpeg's own failure (a full disk as it writes the index) is only in its log, kept quiet: the
+    # file is read back
+    try:
+        frames, _ = imageio_ffmpeg.count_frames_and_secs(str(out))
+    except (RuntimeError, OSError):
+        frames = -1
+    if frames != count:
+        raise OutputError(f"ffmpeg could not finish the movie ({count} frames sent, {max(frames, 0)} in the "
+                          f"file): is the disk full?")
     return count
 
 

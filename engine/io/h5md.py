@@ -27,7 +27,6 @@ import fcntl
 import functools
 import json
 import os
-import re
 import resource
 import struct
 import time
@@ -44,7 +43,7 @@ from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, P
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
 from . import superblock
-from .outputs import occupied
+from .outputs import failed_write_reason, free_bytes, occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
                  "dissipated_sliding", "dissipated_rolling", "dissipated_opening", "work_walls", "work_cell",
@@ -172,8 +171,7 @@ def _write(method):
                 raise OSError(errno.ENOSPC, short)
             return method(self, *args, **kwargs)
         except (OSError, RuntimeError) as error:
-            found = re.search(r"error message = '([^']*)'", str(error))
-            reason = found.group(1) if found else (getattr(error, "strerror", None) or str(error))
+            reason = failed_write_reason(error) or str(error)
             kept = (f"granlab run --resume {str(self.path)!r} goes on from its last checkpoint (step "
                     f"{self.checkpoint_step})" if self.checkpoint_step is not None else "it holds no checkpoint yet")
             step = getattr(args[0], "step", None) if args else None
@@ -431,8 +429,7 @@ class RunWriter:
         """Why the next write may not fit, or None: HDF5 fails a write that runs out of room while
         it releases a dataset, where no caller can catch it, and then crashes; so a write is
         started only with room for a whole checkpoint and its frame (``reserve``) to spare."""
-        free = os.statvfs(self.path.parent)
-        room = free.f_bavail * free.f_frsize
+        room = free_bytes(self.path.parent)
         if room < self.reserve:
             return f"No space left on device ({room / 2 ** 20:.3g} MiB free, a frame and a checkpoint need " \
                    f"{self.reserve / 2 ** 20:.3g} MiB)"

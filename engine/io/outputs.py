@@ -4,6 +4,8 @@ user says so (``--force``), and checked before any work starts."""
 from __future__ import annotations
 
 import os
+import re
+import resource
 import secrets
 import shutil
 import tempfile
@@ -64,6 +66,32 @@ def check_output(path: str | Path, option: str = "--out", force: bool = False, i
     return path
 
 
+def failed_write_reason(error: Exception) -> str | None:
+    """The operating system's reason for a failed write (no space, a file size limit, an I/O
+    error), from an ``OSError`` or from h5py's ``RuntimeError`` that quotes HDF5's; None for
+    another error."""
+    if isinstance(error, OSError):
+        return error.strerror or str(error)
+    found = re.search(r"errno = \d+, error message = '([^']*)'", str(error))
+    return found.group(1) if found else None
+
+
+def free_bytes(folder: Path) -> int:
+    """Room left for files in ``folder`` (its nearest existing parent)."""
+    folder = Path(folder).absolute()
+    while not folder.exists():
+        folder = folder.parent
+    status = os.statvfs(folder)
+    return status.f_bavail * status.f_frsize
+
+
+def room_for_one_file(folder: Path) -> int:
+    """The largest file that may be written into ``folder``: its free bytes, or less under a file
+    size limit (``ulimit -f``)."""
+    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return min(free_bytes(folder), limit) if limit != resource.RLIM_INFINITY else free_bytes(folder)
+
+
 @contextmanager
 def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
     """A new hidden folder to write a command's files into, moved into ``folder`` (made if
@@ -86,7 +114,14 @@ def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
         except FileExistsError:
             continue
     try:
-        yield stage
+        try:
+            yield stage
+        except (OSError, RuntimeError) as error:
+            reason = failed_write_reason(error)
+            if reason is None:
+                raise
+            raise OutputError(f"writing {str(folder / last[0]) if last else str(folder)!r} failed: {reason}; nothing "
+                              f"was written under its name") from None
         if new:
             stage.rename(folder)
         else:
