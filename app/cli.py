@@ -4,7 +4,9 @@ ParaView, OVITO and MDAnalysis, :mod:`app.export`) and ``bench --lab`` (the lab'
 
 from __future__ import annotations
 
+import math
 import sys
+import time
 
 from engine import cli as engine_cli
 from engine.errors import GranLabError
@@ -68,16 +70,23 @@ def _render(args) -> dict:
     from .render import render_run
 
     return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps,
-                      args.force, progress=_render_progress)
+                      args.force, progress=_FrameProgress("rendering"))
 
 
-def _render_progress(done: int, total: int) -> None:
-    """``rendering frame 12 of 100`` on standard error: on one line a terminal rewrites, else at
-    every tenth of the frames."""
-    if sys.stderr.isatty():
-        print(f"\rrendering frame {done} of {total}", end="\n" if done == total else "", file=sys.stderr, flush=True)
-    elif done == total or done % max(1, total // 10) == 0:
-        print(f"rendering frame {done} of {total}", file=sys.stderr, flush=True)
+class _FrameProgress:
+    """``rendering frame 12 of 100`` on standard error: on one line a terminal rewrites, else a
+    line at most once a second (and at the end)."""
+
+    def __init__(self, verb: str):
+        self.verb, self.shown = verb, -math.inf
+
+    def __call__(self, done: int, total: int) -> None:
+        if sys.stderr.isatty():
+            print(f"\r{self.verb} frame {done} of {total}", end="\n" if done == total else "", file=sys.stderr,
+                  flush=True)
+        elif done == total or time.monotonic() - self.shown >= 1.0:
+            self.shown = time.monotonic()
+            print(f"{self.verb} frame {done} of {total}", file=sys.stderr, flush=True)
 
 
 def _print_render(result: dict) -> None:
@@ -89,7 +98,7 @@ def _print_render(result: dict) -> None:
 def _export(args) -> dict:
     from .export import export_run
 
-    return export_run(args.runfile, args.format, args.out, args.frames, args.force)
+    return export_run(args.runfile, args.format, args.out, args.frames, args.force, progress=_FrameProgress("exporting"))
 
 
 def _print_export(result: dict) -> None:

@@ -26,6 +26,7 @@ GranLab's units are the user's, so no file claims a unit (open the H5MD file in 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import h5py
@@ -40,7 +41,7 @@ from engine.io.vtk import VTK_LINE, VTK_VERTEX, write_pvd, write_vtu
 
 from .drawing import cell_outline
 from .frames import FrameData, build_frame
-from .render import select_frames
+from .render import reporting, select_frames
 
 EXPORT_FORMATS = ("vtk", "xyz", "lammps", "h5md")
 SUFFIXES = {"xyz": ".xyz", "lammps": ".dump", "h5md": ".h5md"}
@@ -87,11 +88,13 @@ def _lower_corner(raw: dict, normals: np.ndarray, periodic: tuple[bool, ...]) ->
     return lower
 
 
-def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
+def export_run(path, fmt: str, out, frames=None, force: bool = False,
+               progress: Callable[[int, int], None] | None = None) -> dict:
     """Write frames ``frames`` (:func:`app.render.select_frames`; default every frame) of the
     GranLab run file ``path`` as ``fmt`` (:data:`EXPORT_FORMATS`) into ``out`` (a folder for
     ``vtk``, else a file with the format's suffix). Nothing that exists is written over unless
-    ``force``. Returns ``out``, the ``files`` written, the frame ``indices`` and ``seconds``."""
+    ``force``; ``progress(done, total)`` is called as frames are written. Returns ``out``, the
+    ``files`` written, the frame ``indices`` and ``seconds``."""
     start = time.perf_counter()
     if fmt not in EXPORT_FORMATS:
         raise ParameterError("--format", fmt, f"one of {', '.join(EXPORT_FORMATS)}")
@@ -115,6 +118,8 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
         normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
         kind = f["particles/all/kind"][()] if "particles/all/kind" in f else None
         frames_read = (_Frame(h5md.read_frame(f, index), normals, kind) for index in indices)
+        if progress is not None:
+            frames_read = reporting(frames_read, len(indices), progress)
         if fmt == "h5md":
             # HDF5 crashes on a write that fails inside it: the room is checked first
             needed = len(indices) * f["particles/all/position/value"][0].nbytes * 3 + 2 ** 20
@@ -128,6 +133,8 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False) -> dict:
         else:
             with staged(out.parent, last=[out.name]) as folder:
                 WRITERS[fmt](frames_read, folder / out.name, stem, indices)
+        if progress is not None:
+            progress(len(indices), len(indices))
     return {"run_file": str(path), "format": fmt, "out": str(out), "files": [str(t) for t in targets],
             "frames": len(indices), "indices": [indices[0], indices[-1]], "seconds": time.perf_counter() - start}
 

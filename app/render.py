@@ -677,12 +677,12 @@ def default_movie_frames(f, count: int) -> list[int]:
     return list(range(max(0, count - MOVIE_FRAMES), count))
 
 
-def _reporting(frames: Iterator, total: int, progress: Callable[[int, int], None]) -> Iterator:
-    """``frames``, calling ``progress(done, total)`` as each one is taken for rendering."""
+def reporting(frames: Iterator, total: int, progress: Callable[[int, int], None]) -> Iterator:
+    """``frames``, calling ``progress(done, total)`` as each one is taken (the caller reports the
+    end: a writer may stop asking after the last frame)."""
     for done, frame in enumerate(frames):
         progress(done, total)
         yield frame
-    progress(total, total)
 
 
 def render_run(path, out, frames=None, size="1280x720", color_field: str = "rotation", forces: bool = True,
@@ -719,10 +719,12 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
         bounds = union_bounds(frame for frame, _ in run_frames(f, indices))
         frames_read = run_frames(f, indices)
         if progress is not None:
-            frames_read = _reporting(frames_read, len(indices), progress)
+            frames_read = reporting(frames_read, len(indices), progress)
         with staged(out.parent, last=[out.name]) as folder:
             written = write_movie(frames_read, folder / out.name, size, color_field, forces, fps, bounds, indices,
                                   _protocol(f).get("watched_labels", []))
+        if progress is not None:
+            progress(len(indices), len(indices))
     return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,
             "indices": [indices[0], indices[-1]], "size": list(size), "color": color_field, "forces": forces,
             "fps": fps, "seconds_per_frame": (time.perf_counter() - start) / written}

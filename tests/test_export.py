@@ -81,8 +81,11 @@ def vtu_arrays(path):
 
 def test_vtk_export_is_a_pvd_time_series_of_disks_force_network_and_cell(run_file, tmp_path):
     out = tmp_path / "paraview"
-    result = json.loads(granlab("export", str(run_file), "--format", "vtk", "--out", str(out), "--json").stdout)
+    process = granlab("export", str(run_file), "--format", "vtk", "--out", str(out), "--json")
+    result = json.loads(process.stdout)
     assert result["frames"] == FRAMES and len(result["files"]) == 1 + 3 * FRAMES
+    # progress on standard error, a line a second at most and the last: the --json output stays one object
+    assert process.stderr.splitlines() == ["exporting frame 0 of 3", "exporting frame 3 of 3"]
     collection = ElementTree.parse(out / "compressed.pvd").getroot()
     assert collection.get("type") == "Collection"
     entries = collection.findall("Collection/DataSet")
@@ -263,7 +266,7 @@ def test_an_export_or_render_that_runs_out_of_room_says_so_in_one_line_and_leave
     process = subprocess.run([sys.executable, "-m", "app.cli", command[0], str(run_file), *command[1:], "--out",
                               str(tmp_path / out), "--frames", ":"], capture_output=True, text=True, timeout=600,
                              preexec_fn=_small_file_limit)
-    lines = [line for line in process.stderr.splitlines() if not line.startswith("rendering frame")]
+    lines = [line for line in process.stderr.splitlines() if not line.startswith(("rendering frame", "exporting frame"))]
     assert process.returncode == 2 and len(lines) == 1, process.stderr
     assert "File too large" in lines[0] or "ulimit -f" in lines[0] or "is the disk full" in lines[0], lines
     assert sorted(p.name for p in tmp_path.iterdir()) == []
