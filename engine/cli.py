@@ -48,7 +48,7 @@ def _float(text: str) -> float:
 
 def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
               resume: str | None = None, force: bool = False, checkpoint_frames: int = 10,
-              checkpoint_seconds: float = 60.0) -> dict:
+              checkpoint_seconds: float = 60.0, progress=None) -> dict:
     """Run a scene to its end (or continue a run file from its checkpoint); returns the final
     state, energy budget and recorded series.
 
@@ -57,7 +57,9 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     ``checkpoint_frames`` frames or once ``checkpoint_seconds`` of wall time have passed since
     the last, and at the end: a killed run resumes from the last one, bit for bit. A diverging
     run writes its restored last good state as the last checkpoint. ``out`` is never the resumed
-    file, and an existing ``out`` is written over only with ``force``."""
+    file, and an existing ``out`` is written over only with ``force``. ``progress(done, total,
+    sim)`` is called about four times a second of wall time (the steps run in slices that long;
+    a run split so continues bit for bit)."""
     from .io import h5md
     from .io.outputs import check_output
     from .io.scene import load_scene, parse_scene
@@ -102,16 +104,24 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     try:
         record()
         done = 0
+        slice_steps = 100
         while done < total:
             block = min(every, total - done)
-            try:
-                sim.run(block)
-            except DivergenceError as error:
-                if writer is not None:
-                    writer.write_checkpoint(sim)
-                    error.args = (f"{error} It is the last checkpoint of {out}.",)
-                raise
-            done += block
+            while block > 0:
+                steps = min(block, slice_steps)
+                began = time.perf_counter()
+                try:
+                    sim.run(steps)
+                except DivergenceError as error:
+                    if writer is not None:
+                        writer.write_checkpoint(sim)
+                        error.args = (f"{error} It is the last checkpoint of {out}.",)
+                    raise
+                done += steps
+                block -= steps
+                slice_steps = max(1, int(steps * 0.25 / max(time.perf_counter() - began, 1e-6)))
+                if progress is not None:
+                    progress(done, total, sim)
             record()
         if writer is not None:
             writer.write_checkpoint(sim)
@@ -129,6 +139,21 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         "series": series, "run_file": out,
         "first_order": bool(snap.energy.dissipated_damping) and not TANGENTIAL[sim.law.tangential_model].whole_step_dashpots,
     }
+
+
+def _run_progress():
+    """A line on standard error once a second, from the first second on (a short run prints none):
+    ``running: step 12000 of 80000 (15 %), t = 3.2, 4 s``."""
+    start = time.monotonic()
+    shown = [start]
+
+    def report(done: int, total: int, sim) -> None:
+        now = time.monotonic()
+        if now - shown[0] >= 1.0:
+            shown[0] = now
+            print(f"running: step {done} of {total} ({100 * done / total:.0f} %), t = {sim.time:.4g}, "
+                  f"{now - start:.0f} s", file=sys.stderr, flush=True)
+    return report
 
 
 def _print_run(result: dict) -> None:
@@ -245,6 +270,28 @@ def _print_bench(result: dict) -> None:
           f"(speed-up {result['speedup']:.2f})")
 
 
+class _ProgressLine:
+    """Progress lines on stderr (stdout keeps the result, e.g. --json): rewritten in place on a
+    terminal, one after the other into a file or pipe."""
+
+    def __init__(self):
+        self.in_place = sys.stderr.isatty()
+        self.pending = False
+
+    def __call__(self, line: str) -> None:
+        if self.in_place:
+            sys.stderr.write(f"\r{line}\x1b[K")
+            self.pending = True
+        else:
+            sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.pending:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
 def _prepare(args) -> dict:
     from .analysis.packing import packing_stats
     from .io.h5md import RunWriter
@@ -253,20 +300,25 @@ def _prepare(args) -> dict:
 
     if args.out:
         check_output(args.out, force=args.force)
-    if args.method == "compress":
-        prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
-                                    friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0)
-    else:
-        law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
-                                   cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
-                                   pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
-        common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
-                      seed=args.seed)
-        if args.method == "1":
-            prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
+    progress = _ProgressLine()
+    try:
+        if args.method == "compress":
+            prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
+                                        friction=0.2 if args.mu is None else args.mu,
+                                        max_time=args.max_time or 400.0, progress=progress)
         else:
-            prepared = prepare.method2(speed=args.speed, accelerated=args.accelerated,
-                                       max_time=args.max_time or 4000.0, **common)
+            law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
+                                       cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
+                                       pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
+            common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
+                          seed=args.seed, progress=progress)
+            if args.method == "1":
+                prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
+            else:
+                prepared = prepare.method2(speed=args.speed, accelerated=args.accelerated,
+                                           max_time=args.max_time or 4000.0, **common)
+    finally:
+        progress.close()
     sim = prepared.sim
     stats = packing_stats(sim.snapshot(), prepared.report.force_scale)
     run_file = args.out
@@ -552,7 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="... or once S seconds of wall time have passed since the last (default 60)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force,
-                                                 a.checkpoint_every, a.checkpoint_seconds),
+                                                 a.checkpoint_every, a.checkpoint_seconds, _run_progress()),
                      printer=_print_run)
 
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")

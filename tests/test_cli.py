@@ -1,6 +1,7 @@
 """The granlab command: JSON outputs and clear errors."""
 
 import json
+import re
 import os
 import subprocess
 import sys
@@ -223,3 +224,14 @@ def test_bench_scaling_reports_each_size_with_its_memory_and_rebuild_share():
         assert row["rebuild_in_steps"] > 0.0
     assert result["worst_over_best"] >= 1.0
     assert bench.rebuild_seconds(bench.reference_system(12)) > 0.0
+
+
+def test_a_long_run_shows_its_progress_once_a_second_and_its_json_stays_one_object():
+    """The built-in scene runs for seconds: it printed nothing until its end."""
+    process = granlab("run", "--json")
+    lines = process.stderr.splitlines()
+    assert len(lines) >= 2 and all(re.fullmatch(r"running: step \d+ of 110560 \(\d+ %\), t = [0-9.e+-]+, \d+ s", line)
+                                   for line in lines), lines
+    steps = [int(line.split()[2]) for line in lines]
+    assert steps == sorted(steps) and steps[-1] < 110560
+    assert json.loads(process.stdout)["steps"] == 110560
