@@ -346,7 +346,7 @@ def _print_prepare(result: dict) -> None:
 
 
 def _study(args) -> dict:
-    from .studies import RatchetStudy, run_ratchet_study, text_progress
+    from .studies import RatchetStudy, TextProgress, run_ratchet_study
 
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
     sweep = len(args.amplitude) > 1
@@ -359,7 +359,7 @@ def _study(args) -> dict:
                              gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
         out = str(Path(args.out) / f"amplitude-{amplitude:g}") if sweep and args.out else args.out
         result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=out,
-                                   progress=None if args.json else text_progress, force=args.force)
+                                   progress=None if args.json else TextProgress(), force=args.force)
         if result["failed"] and not any(model["completed"] for model in result["models"].values()):
             first = result["failed"][0]
             raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "
@@ -411,7 +411,7 @@ _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "fi
 def _reproduce(args) -> dict:
     from .reproduce import (PAPER_SIZE, Reproduction, finished_samples, resume_folder, run_reproduction,
                             start_folder, summarize_series)
-    from .studies import STUDY_LIMITS, text_progress
+    from .studies import STUDY_LIMITS, TextProgress
 
     given = {key: getattr(args, option[2:].replace("-", "_")) for key, option in _REPRODUCTION_OPTIONS.items()}
     given = {key: value for key, value in given.items() if value is not None}
@@ -442,7 +442,7 @@ def _reproduce(args) -> dict:
         folder = None if args.out is None else start_folder(args.out, reproduction)
     try:
         result = run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
-                                  progress=None if args.json else text_progress, folder=folder)
+                                  progress=None if args.json else TextProgress(), folder=folder)
     except KeyboardInterrupt:
         if folder is None:
             raise

@@ -297,10 +297,21 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
 
     Without ``scheduler``, ``warm_up()`` compiles the kernels first and a local cluster starts with
     ``workers`` (default: all cores) single-threaded worker processes; ``scheduler`` is the address
-    of an existing one. ``progress(done, total)`` is called as tasks finish."""
+    of an existing one. ``progress(done, total, phase)`` is called as tasks finish and once a
+    second meanwhile (``phase``: what is going on), so that minutes of compiling or of long samples
+    are seen to pass."""
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
+    state = {"done": 0, "phase": "compiling the kernels" if warm_up is not None and not scheduler else "starting"}
+    finished = threading.Event()
+
+    def beat():
+        while not finished.wait(1.0) and state["done"] < len(tasks):
+            progress(state["done"], len(tasks), state["phase"])
+
+    if progress is not None:
+        threading.Thread(target=beat, name="progress", daemon=True).start()
     try:
         if scheduler:
             try:
@@ -310,12 +321,14 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
         else:
             if warm_up is not None:
                 warm_up()
+            state["phase"] = "starting the workers"
             with _workers_leave_interrupts_to_us():
                 cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                                        processes=True, dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         with client:
             futures = [client.submit(function, *task, key=key, pure=False) for task, key in zip(tasks, keys)]
+            state["phase"] = "running"
             outcomes = {}
             for done, future in enumerate(as_completed(futures), start=1):
                 try:
@@ -325,19 +338,28 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
                 else:
                     if on_result is not None:
                         on_result(future.key, outcomes[future.key])
+                state["done"] = done
                 if progress is not None:
-                    progress(done, len(futures))
+                    progress(done, len(futures), "running")
     finally:
+        finished.set()
         if cluster is not None:
             cluster.close()
     return [outcomes[key] for key in keys]
 
 
-def text_progress(done: int, total: int, stream=sys.stderr) -> None:
-    """A one-line progress bar on the terminal."""
-    width = 30
-    filled = int(width * done / total)
-    stream.write(f"\r[{'#' * filled}{' ' * (width - filled)}] {done}/{total} samples")
-    if done == total:
-        stream.write("\n")
-    stream.flush()
+class TextProgress:
+    """A one-line progress bar on the terminal, with the time since it was made and what is going
+    on: ``[######      ] 4/20 samples, running, 73 s``."""
+
+    def __init__(self, stream=sys.stderr):
+        self.stream, self.start = stream, time.monotonic()
+
+    def __call__(self, done: int, total: int, phase: str = "") -> None:
+        width = 30
+        filled = int(width * done / total)
+        self.stream.write(f"\r[{'#' * filled}{' ' * (width - filled)}] {done}/{total} samples, {phase}, "
+                          f"{time.monotonic() - self.start:.0f} s ")
+        if done == total:
+            self.stream.write("\n")
+        self.stream.flush()

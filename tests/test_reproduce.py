@@ -108,8 +108,12 @@ def test_summary_gives_mean_and_standard_error():
 def test_dask_gives_the_numbers_of_a_serial_run(capsys):
     # short stages (10 T0): out of equilibrium, but every number must still depend on the seed only
     reproduction = Reproduction("gilabert-method1", particles=30, samples=2, first_seed=5, max_time=10.0)
-    result = run_reproduction(reproduction, workers=1)
+    calls = []
+    result = run_reproduction(reproduction, workers=1, progress=lambda *call: calls.append(call))
     assert result["failed"] == [] and len(result["samples"]) == 16
+    # the phases are seen to pass once a second, not only as samples finish (16 calls before)
+    assert len(calls) > 16 and calls[-1] == (16, 16, "running")
+    assert {phase for _, _, phase in calls} <= {"compiling the kernels", "starting the workers", "running"}
     for row in result["samples"][::5]:
         case = Case(row["cohesive"], row["friction"], row["rolling"])
         serial = gilabert_sample(reproduction, case, row["seed"])
