@@ -777,10 +777,17 @@ def run_args(args) -> int:
             raise
         print(f"granlab {args.command}: error: {h5md.damaged(source, error)}", file=sys.stderr)
         return 2
-    if args.json:
-        print(json.dumps(jsonable(result)))
-    else:
-        args.printer(result)
+    try:
+        if args.json:
+            print(json.dumps(jsonable(result)))
+        else:
+            args.printer(result)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # a reader that stopped early (granlab ... | head) had what it wanted; Python's own flush
+        # at exit must not fail again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     return 0
 
 

@@ -235,3 +235,15 @@ def test_a_long_run_shows_its_progress_once_a_second_and_its_json_stays_one_obje
     steps = [int(line.split()[2]) for line in lines]
     assert steps == sorted(steps) and steps[-1] < 110560
     assert json.loads(process.stdout)["steps"] == 110560
+
+
+def test_output_cut_short_by_its_reader_ends_without_a_traceback():
+    """``granlab analyze ... | head -1`` printed a BrokenPipeError traceback under the line. Here
+    the reader is gone before the first line is written."""
+    read, write = os.pipe()
+    process = subprocess.Popen([sys.executable, "-m", "engine.cli", "analyze", "tests/data/lammps/packing.dump",
+                                "packing"], stdout=write, stderr=subprocess.PIPE, text=True,
+                               cwd=os.path.dirname(os.path.dirname(__file__)))
+    os.close(write)
+    os.close(read)
+    assert process.wait(timeout=60) == 1 and process.stderr.read() == ""
