@@ -225,5 +225,5 @@ def test_granlab_analyze_prints_the_rows_and_its_json_keeps_nan(tmp_path, capsys
     assert cli.main(["analyze", str(path), "fractal", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["d_F"] == "nan" and result["fit_range"] == ["nan", "nan"]
-    assert set(result) == {"analysis", "timings_s", "run_file", "source", "particles", "forces_known", "law",
+    assert set(result) == {"analysis", "timings_s", "run_file", "source", "particles", "forces_known", "law", "warnings",
                            *report.values}
