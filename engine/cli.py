@@ -270,26 +270,9 @@ def _print_bench(result: dict) -> None:
           f"(speed-up {result['speedup']:.2f})")
 
 
-class _ProgressLine:
-    """Progress lines on stderr (stdout keeps the result, e.g. --json): rewritten in place on a
-    terminal, one after the other into a file or pipe."""
-
-    def __init__(self):
-        self.in_place = sys.stderr.isatty()
-        self.pending = False
-
-    def __call__(self, line: str) -> None:
-        if self.in_place:
-            sys.stderr.write(f"\r{line}\x1b[K")
-            self.pending = True
-        else:
-            sys.stderr.write(line + "\n")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.pending:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+def _progress_line(line: str) -> None:
+    """A preparation's progress, once a second, on standard error: standard output keeps the result."""
+    print(line, file=sys.stderr, flush=True)
 
 
 def _prepare(args) -> dict:
@@ -300,25 +283,21 @@ def _prepare(args) -> dict:
 
     if args.out:
         check_output(args.out, force=args.force)
-    progress = _ProgressLine()
-    try:
-        if args.method == "compress":
-            prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
-                                        friction=0.2 if args.mu is None else args.mu,
-                                        max_time=args.max_time or 400.0, progress=progress)
+    if args.method == "compress":
+        prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
+                                    friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0,
+                                    progress=_progress_line)
+    else:
+        law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
+                                   cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
+                                   pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
+        common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
+                      seed=args.seed, progress=_progress_line)
+        if args.method == "1":
+            prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
         else:
-            law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
-                                       cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
-                                       pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
-            common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
-                          seed=args.seed, progress=progress)
-            if args.method == "1":
-                prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
-            else:
-                prepared = prepare.method2(speed=args.speed, accelerated=args.accelerated,
-                                           max_time=args.max_time or 4000.0, **common)
-    finally:
-        progress.close()
+            prepared = prepare.method2(speed=args.speed, accelerated=args.accelerated,
+                                       max_time=args.max_time or 4000.0, **common)
     sim = prepared.sim
     stats = packing_stats(sim.snapshot(), prepared.report.force_scale)
     run_file = args.out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,9 +110,54 @@ class Relaxation:
     wall_time_s: float
 
 
+class Progress:
+    """Reports a preparation's state as one line, ``emit(line)``, at most every ``every`` seconds
+    of wall clock: a large packing can run for minutes between two results.
+
+    :meth:`run` steps a simulation in pieces of about ``every`` seconds (each piece the same
+    steps as one run of them all); ``stage`` names what it is doing in the next lines."""
+
+    def __init__(self, emit: Callable[[str], None], pressure: float, stage: str = "relaxing", every: float = 1.0):
+        self.emit, self.pressure, self.stage, self.every = emit, pressure, stage, every
+        self.start = self.last = time.perf_counter()
+        self.piece = 1
+
+    def run(self, sim: Simulation, steps: int) -> None:
+        while steps > 0:
+            piece = min(steps, self.piece)
+            began = time.perf_counter()
+            sim.run(piece)
+            now = time.perf_counter()
+            steps -= piece
+            self.piece = max(1, min(2 * piece, int(piece * self.every / max(now - began, 1e-9))))
+            if now - self.last >= self.every:
+                self.last = now
+                self.emit(self.line(sim, now - self.start))
+
+    def line(self, sim: Simulation, elapsed: float) -> str:
+        p = sim.particles
+        kinetic = 0.5 * float(np.sum(p.mass * np.sum(p.velocity ** 2, axis=1)))
+        report = equilibrium(sim, self.pressure)
+        ratios = {name: getattr(report, name) for name in ("force", "moment", "pressure", "kinetic")}
+        furthest = max(ratios, key=ratios.get)
+        pressure = (f"pressure {report.measured_pressure / self.pressure:.4f} of P0" if self.pressure > 0
+                    else f"pressure {report.measured_pressure:.3g}")
+        return (f"{self.stage}: t = {sim.time:.1f}, {pressure}, kinetic energy {kinetic:.2g}, "
+                f"{furthest} {ratios[furthest]:.3g}x its equilibrium tolerance, {elapsed:.0f} s")
+
+
+def advance(sim: Simulation, steps: int, progress: Progress | None) -> None:
+    """``sim.run(steps)``, reporting to ``progress`` if given."""
+    if progress is None:
+        sim.run(steps)
+    else:
+        progress.run(sim, steps)
+
+
 def relax(sim: Simulation, pressure: float, max_time: float, check_every: float | None = None,
-          kinetic: bool = True) -> Relaxation:
-    """Run until :func:`equilibrium` holds (checked every ``check_every``) or ``max_time`` has passed.
+          kinetic: bool = True, progress: Progress | None = None) -> Relaxation:
+    """Run until :func:`equilibrium` holds (checked every ``check_every``) or ``max_time`` has passed,
+    reporting to ``progress`` (if given) as it goes.
 
     ``kinetic=False`` waits for balanced forces, moments and pressure only (an isolated aggregate
     can spin as a rigid body for ever)."""
@@ -128,6 +174,6 @@ def relax(sim: Simulation, pressure: float, max_time: float, check_every: float 
 
     report = equilibrium(sim, pressure)
     while not done(report) and sim.time - start_time < max_time - 0.5 * sim.dt:
-        sim.run(min(steps, max(1, int(math.ceil((max_time - (sim.time - start_time)) / sim.dt)))))
+        advance(sim, min(steps, max(1, int(math.ceil((max_time - (sim.time - start_time)) / sim.dt)))), progress)
         report = equilibrium(sim, pressure)
     return Relaxation(report, sim.time - start_time, time.perf_counter() - start_wall)

@@ -23,7 +23,7 @@ from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, pos
 from ..simulation import Simulation
 from ..state import (CELL_MASS_FRACTION, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState,
                      default_cell_mass)
-from .equilibrium import EquilibriumReport, equilibrium, measured_pressure, relax
+from .equilibrium import EquilibriumReport, Progress, advance, equilibrium, measured_pressure, relax
 
 
 @dataclass
@@ -81,12 +81,14 @@ def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness
 
 
 def compress(count: int = 16, seed: int = 0, pressure: float = 1.0, friction: float = 0.2,
-             max_time: float = 400.0, **box_options) -> Prepared:
+             max_time: float = 400.0, progress: Callable[[str], None] | None = None, **box_options) -> Prepared:
     """Ratcheting Sec. IV B 1: compress the biaxial box frictionless to ``pressure``, then switch
-    friction on. Stops when Gilabert's equilibrium criteria hold (F1 = P a) or after ``max_time``."""
+    friction on. Stops when Gilabert's equilibrium criteria hold (F1 = P a) or after ``max_time``.
+    ``progress(line)``, if given, gets a line on the state about once a second of wall clock."""
     start = time.perf_counter()
     sim = biaxial_box(count, seed, pressure, **box_options)
-    relaxation = relax(sim, pressure, max_time)
+    reporter = None if progress is None else Progress(progress, pressure, "compressing")
+    relaxation = relax(sim, pressure, max_time, progress=reporter)
     sim.set_law(friction=friction)
     return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "compress", pressure)
 
@@ -167,11 +169,12 @@ def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = N
 
 def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
             seed: int = 0, diameter: float = 1.0, max_time: float = 2000.0, cell_mass_disks: int | None = None,
-            dt_safety: float = 0.3, cell_mass_reading: str = "mass") -> Prepared:
+            dt_safety: float = 0.3, cell_mass_reading: str = "mass",
+            progress: Callable[[str], None] | None = None) -> Prepared:
     """Gilabert Sec. III A: a granular gas at ``solid_fraction`` in a periodic cell, at rest, brought
     to equilibrium under the isotropic ``pressure`` by stress control of the cell (Eq. 3), whose
     generalized mass is that of a sample of ``cell_mass_disks`` disks by ``cell_mass_reading``
-    (:func:`cell_mass`)."""
+    (:func:`cell_mass`). ``progress(line)``, if given, gets a line on the state about once a second."""
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
     r, positions, length = gilabert_gas(count, solid_fraction, seed, diameter)
@@ -179,7 +182,8 @@ def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
                         mass=cell_mass(r, length, diameter, cell_mass_disks, cell_mass_reading))
     sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi / diameter ** 2), law,
                      Integration(dt_safety=dt_safety), cell=cell)
-    relaxation = relax(sim, pressure, max_time)
+    reporter = None if progress is None else Progress(progress, pressure, "compressing")
+    relaxation = relax(sim, pressure, max_time, progress=reporter)
     return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "1", pressure)
 
 
@@ -204,7 +208,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
             speed: float | None = None, seed: int = 0, diameter: float = 1.0, max_time: float = 4000.0,
             max_strain_rate: float = 1e-3, accelerated: bool = False, soft_kappa: float = 100.0,
             cell_mass_disks: int | None = None, dt_safety: float = 0.3, cell_mass_reading: str = "mass",
-            on_stage: Callable[[str, Simulation], None] | None = None) -> Prepared:
+            on_stage: Callable[[str, Simulation], None] | None = None,
+            progress: Callable[[str], None] | None = None) -> Prepared:
     """Gilabert Sec. III B, for cohesive laws.
 
     1. A gas at ``solid_fraction`` with Maxwellian velocities of mean quadratic velocity ``speed``
@@ -220,7 +225,8 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     The cell's generalized mass is that of a sample of ``cell_mass_disks`` disks by ``cell_mass_reading``
     (:func:`cell_mass`).
     ``on_stage(name, sim)`` is called at the end of each stage (``aggregation``, ``relaxation``:
-    the packing at ``P* = 0`` of Gilabert Table IV, ``compression``).
+    the packing at ``P* = 0`` of Gilabert Table IV, ``compression``); ``progress(line)``, if given,
+    gets a line on the state about once a second.
     """
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
@@ -243,28 +249,35 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     # stage 1: aggregation at fixed size, until one cluster in equilibrium
     check = max(sim.dt, 1.0)
     stage_start = time.perf_counter()
+    reporter = None if progress is None else Progress(progress, 0.0, "aggregating")
     while sim.time < max_time:
-        sim.run_for(check)
+        advance(sim, int(round(check / sim.dt)), reporter)
         if clusters(sim) == 1:
             report = equilibrium(sim, measured_pressure(sim))
             if report.force < 1.0 and report.moment < 1.0:
                 break
     stages = {"aggregation": (sim.time, time.perf_counter() - stage_start)}
     if accelerated:
-        _stiffen(sim, target_kn, law)
+        if reporter is not None:
+            reporter.stage = "stiffening"
+        _stiffen(sim, target_kn, law, reporter)
     sim_time += sim.time
     if on_stage is not None:
         on_stage("aggregation", sim)
     # stage 2: relaxation with the cell free at zero stress
     sim.set_cell_stress(0.0, max_strain_rate)
-    relaxation = relax(sim, 0.0, max_time, kinetic=False)
+    if reporter is not None:
+        reporter.stage = "relaxing"
+    relaxation = relax(sim, 0.0, max_time, kinetic=False, progress=reporter)
     stages["relaxation"] = (relaxation.sim_time, relaxation.wall_time_s)
     sim_time += relaxation.sim_time
     if on_stage is not None:
         on_stage("relaxation", sim)
     # stage 3: compression to the target pressure
     sim.set_cell_stress(pressure, max_strain_rate)
-    relaxation = relax(sim, pressure, max_time)
+    if reporter is not None:
+        reporter.stage, reporter.pressure = "compressing", pressure
+    relaxation = relax(sim, pressure, max_time, progress=reporter)
     stages["compression"] = (relaxation.sim_time, relaxation.wall_time_s)
     sim_time += relaxation.sim_time
     if on_stage is not None:
@@ -273,11 +286,12 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
                     pressure, stages)
 
 
-def _stiffen(sim: Simulation, target_kn: float, law: ContactLaw, steps: int = 20) -> None:
+def _stiffen(sim: Simulation, target_kn: float, law: ContactLaw, reporter: Progress | None, steps: int = 20) -> None:
     """Raise K_N and K_T geometrically to ``target_kn`` in ``steps`` stages, relaxing after each."""
     factor = (target_kn / sim.law.normal_stiffness) ** (1.0 / steps)
     for _ in range(steps):
         kn = min(target_kn, sim.law.normal_stiffness * factor)
         sim.set_law(normal_stiffness=kn, tangential_stiffness=kn * law.tangential_stiffness / law.normal_stiffness)
-        sim.run_for(20.0 * math.sqrt(float(sim.particles.mass.min()) / kn) * 2.0 * math.pi)
+        advance(sim, int(round(20.0 * math.sqrt(float(sim.particles.mass.min()) / kn) * 2.0 * math.pi / sim.dt)),
+                reporter)
     sim.set_law(**{k: getattr(law, k) for k in ("normal_stiffness", "tangential_stiffness")})
