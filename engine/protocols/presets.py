@@ -27,14 +27,14 @@ import numpy as np
 
 from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
-from ..params import TANGENTIAL, TANGENTIAL_MODELS, ContactLaw, Integration, Load, PeriodicCell, Wall
+from ..params import TANGENTIAL, TANGENTIAL_MODELS, ContactLaw, Integration, PeriodicCell, Wall
 from ..simulation import Simulation, Snapshot, side_by_side
 from ..state import ParticleState
 from .cyclic import CyclicLoad, apply_load
 from .equilibrium import equilibrium, measured_pressure
 from .measures import (PairMaximum, contact_rows, coordination, mobilisation, pair_label, sliding_contacts,
                        solid_fraction)
-from .prepare import biaxial_box, clusters, gilabert_gas, gilabert_law
+from .prepare import COMPRESSION_RAMP, biaxial_box, clusters, gilabert_gas, gilabert_law, hold_load, ramp_load
 from .settings import LAW_CONTROLS, LabSettings
 
 MAX_CYCLE_STEPS = 1e7
@@ -470,23 +470,15 @@ class RatchetPreset(Preset):
     particle_range = (4, 20000)
     elliptic = False
     compression_limit = 200.0
-    compression_ramp = 10.0
     watch_count = 4
     reference_cycle = 2
 
     def _build(self) -> None:
         s = self.settings
-        # walls as heavy as one row of disks: walls as heavy as the whole packing (the study's)
-        # hit a large loose lattice hard enough to overlap disks by a radius (5600 disks: t = 1.9)
+        # compressed as by prepare.compress, a step at a time: walls of one row, the load ramped
         self._sim = biaxial_box(s.particles, seed=s.seed, pressure=s.pressure, damping_ratio=s.damping_ratio,
-                                tangential_model=s.tangential_model,
-                                wall_mass_fraction=1.0 / math.ceil(math.sqrt(s.particles)))
-        # the pressure rises smoothly from 0 to P0 over the ramp, so that the loose lattice
-        # collapses slowly: at the full pressure at once, large samples meet at speeds that
-        # overlap disks by half a radius
-        ramp = Load(amplitude=s.pressure / 2.0, period=2.0 * self.compression_ramp)
-        for wall in ("right", "top"):
-            self._sim.set_wall_load(wall, ramp)
+                                tangential_model=s.tangential_model)
+        ramp_load(self._sim, s.pressure, COMPRESSION_RAMP)
         self.stage = "compressing"
         self._ramping = True
         self._cycle = 0
@@ -580,10 +572,9 @@ class RatchetPreset(Preset):
         sim = self._sim
         if self.stage == "compressing":
             sim.run(steps)
-            if self._ramping and sim.time >= self.compression_ramp:
+            if self._ramping and sim.time >= COMPRESSION_RAMP:
                 self._ramping = False
-                for wall in ("right", "top"):
-                    sim.set_wall_load(wall, Load(base=self.settings.pressure))
+                hold_load(sim, self.settings.pressure)
             if not self._ramping and sim.time >= self._next_check:
                 self._next_check = sim.time + 1.0
                 if equilibrium(sim, self.settings.pressure).equilibrated or sim.time > self.compression_limit:
