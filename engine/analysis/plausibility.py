@@ -9,6 +9,7 @@ import numpy as np
 
 from ..state import STATUS_NONE
 from .packing import solid_fraction
+from .states import contact_force_vectors
 
 UNBALANCED_FORCE = 0.1
 """A disk's net contact force, as a fraction of the mean contact force, above which it is out of balance."""
@@ -43,10 +44,7 @@ def _unbalanced(state, pair: np.ndarray) -> list[str]:
     """Another code's forces: do the disks they touch feel a net force near zero, as at rest?"""
     c, n = state.contacts, state.disks
     i, j = c.i[pair], c.j[pair]
-    branch = state.positions[i] - state.positions[j] - c.image[pair] * state.box_lengths
-    normal = branch / np.hypot(branch[:, 0], branch[:, 1])[:, None]
-    tangent = np.column_stack([-normal[:, 1], normal[:, 0]])
-    force = c.normal_force[pair][:, None] * normal + c.tangential_force[pair][:, None] * tangent
+    _, force = contact_force_vectors(state.positions, c, state.box_lengths, pair)
     net = np.zeros((n, 2))
     np.add.at(net, i, force)
     np.add.at(net, j, -force)

@@ -509,13 +509,21 @@ def lammps_contacts(dump: Dump, timestep: int, ids: np.ndarray, positions: np.nd
                            rolling_spring=np.zeros_like(fn), rolling_distance=np.zeros_like(fn))
 
 
-def contact_stress(positions: np.ndarray, contacts: ContactSnapshot, lengths: np.ndarray) -> np.ndarray:
-    """The disk-disk stress (1/A) sum F ⊗ l (2 × 2, compression positive) of contacts whose force
-    F on disk i is F_n n + F_t t, with l the branch vector from j's image to i."""
-    delta = positions[contacts.i] - positions[contacts.j] - contacts.image * lengths
+def contact_force_vectors(positions: np.ndarray, contacts: ContactSnapshot, lengths: np.ndarray,
+                          rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    """The branch vectors l from j's image to i and the forces F = F_n n + F_t t on disk i of the
+    disk-disk ``contacts`` (their ``rows``)."""
+    delta = positions[contacts.i[rows]] - positions[contacts.j[rows]] - contacts.image[rows] * lengths
     normal = delta / np.hypot(delta[:, 0], delta[:, 1])[:, None]
     tangent = np.column_stack([-normal[:, 1], normal[:, 0]])
-    force = contacts.normal_force[:, None] * normal + contacts.tangential_force[:, None] * tangent
+    force = contacts.normal_force[rows][:, None] * normal + contacts.tangential_force[rows][:, None] * tangent
+    return delta, force
+
+
+def contact_stress(positions: np.ndarray, contacts: ContactSnapshot, lengths: np.ndarray) -> np.ndarray:
+    """The disk-disk stress (1/A) sum F ⊗ l (2 × 2, compression positive) of ``contacts``
+    (:func:`contact_force_vectors`)."""
+    delta, force = contact_force_vectors(positions, contacts, lengths)
     return force.T @ delta / float(lengths[0] * lengths[1])
 
 
