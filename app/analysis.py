@@ -2,7 +2,7 @@
 
 The engine thread takes the state (a snapshot, or the replayed frame read from its run file) and
 hands it to :class:`AnalysisRunner`, whose single worker thread runs
-:func:`engine.analysis.report.analyze`; neither the engine nor the UI waits for it. Each result
+:func:`granlab.engine.analysis.report.analyze`; neither the engine nor the UI waits for it. Each result
 gets a sequence number; tabs poll :meth:`AnalysisRunner.latest` and redraw when it changes.
 The functions below turn a result into what the plots and the 3D scene draw.
 """
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.analysis.report import AnalysisReport, analyze
-from engine.analysis.states import PackingState
-from engine.errors import GranLabError
+from granlab.engine.analysis.report import AnalysisReport, analyze
+from granlab.engine.analysis.states import PackingState
+from granlab.engine.errors import GranLabError
 
 SQRT3 = float(np.sqrt(3.0))
 

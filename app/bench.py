@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numba
 
-from engine import bench as engine_bench
-from engine.errors import GranLabError
-from engine.protocols.presets import make_preset, preset_settings
+from granlab.engine import bench as engine_bench
+from granlab.engine.errors import GranLabError
+from granlab.engine.protocols.presets import make_preset, preset_settings
 
 from .server import read_status as _status
 from .server import spawn

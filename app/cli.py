@@ -1,6 +1,6 @@
-"""The ``granlab`` command: the engine's commands (:mod:`engine.cli`), ``serve`` (the lab),
-``render`` (pictures and movies of a run file, :mod:`app.render`), ``export`` (run files for
-ParaView, OVITO and MDAnalysis, :mod:`app.export`) and ``bench --lab`` (the lab's benchmark)."""
+"""The ``granlab`` command: the engine's commands (:mod:`granlab.engine.cli`), ``serve`` (the lab),
+``render`` (pictures and movies of a run file, :mod:`granlab.app.render`), ``export`` (run files for
+ParaView, OVITO and MDAnalysis, :mod:`granlab.app.export`) and ``bench --lab`` (the lab's benchmark)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 import sys
 import time
 
-from engine import cli as engine_cli
-from engine.errors import GranLabError
+from granlab.engine import cli as engine_cli
+from granlab.engine.errors import GranLabError
 
 
 def build_parser():

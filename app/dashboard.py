@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import panel as pn
 
-from engine.analysis.report import ANALYSES
-from engine.params import TANGENTIAL_MODELS
-from engine.protocols.presets import PRESETS
-from engine.protocols.settings import CONTROL_LABELS
+from granlab.engine.analysis.report import ANALYSES
+from granlab.engine.params import TANGENTIAL_MODELS
+from granlab.engine.protocols.presets import PRESETS
+from granlab.engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis
 from .buffers import Cursor
@@ -39,7 +39,7 @@ SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, 
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
 JOB_KINDS = ("save", "load", "record")
-"""The file jobs, each shown beside its button while it runs (:mod:`app.jobs`)."""
+"""The file jobs, each shown beside its button while it runs (:mod:`granlab.app.jobs`)."""
 PANES = ("Key plots", "More plots", "About this preset", "Analysis")
 HEADER_HEIGHT = 58
 HEADER_NOTES = ("preset", "run", "speed")

@@ -1,5 +1,5 @@
 """What a picture of the lab shows and in which colours, shared by the live 3D scene
-(:mod:`app.scene`), the movies of ``granlab render`` (:mod:`app.render`) and the legends.
+(:mod:`granlab.app.scene`), the movies of ``granlab render`` (:mod:`granlab.app.render`) and the legends.
 
 A :class:`SceneFrame` holds one picture of the simulation: disks in the plane with their
 per-disk colour fields, the force network, walls, the periodic cell and the watched contacts.
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from granlab.engine.state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 COLOR_FIELDS = ("rotation", "coordination", "pressure", "sliding")
 

@@ -30,14 +30,14 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from engine.analysis.report import ANALYSES
-from engine.analysis.states import PackingState
-from engine.errors import DivergenceError, GranLabError, ParameterError
-from engine.io.jsonsafe import jsonable
-from engine.io.outputs import free_name, occupied
-from engine.params import positive
-from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
-from engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
+from granlab.engine.analysis.report import ANALYSES
+from granlab.engine.analysis.states import PackingState
+from granlab.engine.errors import DivergenceError, GranLabError, ParameterError
+from granlab.engine.io.jsonsafe import jsonable
+from granlab.engine.io.outputs import free_name, occupied
+from granlab.engine.params import positive
+from granlab.engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
+from granlab.engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
@@ -635,7 +635,7 @@ def _groups(views) -> list[tuple[str, int]]:
 
 def _cycle_records(buffer: SeriesBuffer, sim) -> list[tuple]:
     """The cycle records of ``granlab info`` from the lab's cycle series, as
-    :meth:`engine.io.h5md.RunWriter.write_cycle_record` takes them (wall positions rebuilt from
+    :meth:`granlab.engine.io.h5md.RunWriter.write_cycle_record` takes them (wall positions rebuilt from
     the box lengths: the left and bottom walls do not move)."""
     columns = buffer.columns
     names = sim.walls.names

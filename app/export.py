@@ -32,12 +32,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from engine.errors import OutputError, ParameterError
-from engine.io import h5md
-from engine.io.extxyz import write_xyz
-from engine.io.lammps import LOCAL_ITEM, write_dump
-from engine.io.outputs import check_output, room_for_one_file, staged
-from engine.io.vtk import VTK_LINE, VTK_VERTEX, write_pvd, write_vtu
+from granlab.engine.errors import OutputError, ParameterError
+from granlab.engine.io import h5md
+from granlab.engine.io.extxyz import write_xyz
+from granlab.engine.io.lammps import LOCAL_ITEM, write_dump
+from granlab.engine.io.outputs import check_output, room_for_one_file, staged
+from granlab.engine.io.vtk import VTK_LINE, VTK_VERTEX, write_pvd, write_vtu
 
 from .drawing import cell_outline
 from .frames import FrameData, build_frame
@@ -55,7 +55,7 @@ def contacts_dump_name(out: Path) -> Path:
 
 class _Frame:
     """One frame of a run file with what every format writes: the lab's colour fields and the
-    force network's segments (:func:`app.frames.build_frame`), the box's lower corner."""
+    force network's segments (:func:`granlab.app.frames.build_frame`), the box's lower corner."""
 
     def __init__(self, raw: dict, normals: np.ndarray, kind: np.ndarray):
         self.raw = raw
@@ -90,7 +90,7 @@ def _lower_corner(raw: dict, normals: np.ndarray, periodic: tuple[bool, ...]) ->
 
 def export_run(path, fmt: str, out, frames=None, force: bool = False,
                progress: Callable[[int, int], None] | None = None) -> dict:
-    """Write frames ``frames`` (:func:`app.render.select_frames`; default every frame) of the
+    """Write frames ``frames`` (:func:`granlab.app.render.select_frames`; default every frame) of the
     GranLab run file ``path`` as ``fmt`` (:data:`EXPORT_FORMATS`) into ``out`` (a folder for
     ``vtk``, else a file with the format's suffix). Nothing that exists is written over unless
     ``force``; ``progress(done, total)`` is called as frames are written. Returns ``out``, the

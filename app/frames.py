@@ -13,16 +13,16 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from engine.kernels.jit import KERNEL
-from engine.protocols.measures import pair_codes
-from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from granlab.engine.kernels.jit import KERNEL
+from granlab.engine.protocols.measures import pair_codes
+from granlab.engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 from .drawing import SceneFrame
 
 
 @dataclass(frozen=True)
 class FrameData:
-    """The arrays a frame is built from (a :class:`engine.simulation.Snapshot` or a run-file frame).
+    """The arrays a frame is built from (a :class:`granlab.engine.simulation.Snapshot` or a run-file frame).
 
     ``pair (M, 2)`` with ``j >= N`` for wall ``j - N``; ``image (M, 2)``; ``wall_normal (W, 2)``
     and ``wall_offset (W,)`` (the line ``n · x = s``); ``cell (2,)`` periodic lengths (0 along an
@@ -44,7 +44,7 @@ class FrameData:
 
     @classmethod
     def from_simulation(cls, sim) -> "FrameData":
-        """A copy of what a frame needs from a live :class:`engine.simulation.Simulation`: the
+        """A copy of what a frame needs from a live :class:`granlab.engine.simulation.Simulation`: the
         disks and the contact rows in use (a fraction of a full snapshot's cost)."""
         p, table = sim.particles, sim.contacts
         status = sim.contact_status()
@@ -58,7 +58,7 @@ class FrameData:
 
     @classmethod
     def from_snapshot(cls, snap) -> "FrameData":
-        """What a frame needs from a :class:`engine.simulation.Snapshot` (its arrays are copies
+        """What a frame needs from a :class:`granlab.engine.simulation.Snapshot` (its arrays are copies
         already: nothing is copied again)."""
         c = snap.contacts
         return cls(snap.positions, snap.radii, snap.angles, np.column_stack([c.i, c.j]), c.image, c.status,
@@ -67,7 +67,7 @@ class FrameData:
 
     @classmethod
     def from_run_frame(cls, frame: dict, wall_normal: np.ndarray) -> "FrameData":
-        """What a frame needs from a run-file frame (:func:`engine.io.h5md.read_frame`), with the
+        """What a frame needs from a run-file frame (:func:`granlab.engine.io.h5md.read_frame`), with the
         walls' normals ``(W, 2)`` (from the file's parameters; the offsets are per frame)."""
         contacts = frame["contacts"]
         periodic = np.array([b == "periodic" for b in frame["boundary"]])

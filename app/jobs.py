@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from engine.errors import GranLabError
+from granlab.engine.errors import GranLabError
 
 SPAWN = multiprocessing.get_context("spawn")
 POLL_SECONDS = 0.1

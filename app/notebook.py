@@ -16,9 +16,9 @@ import numpy as np
 import rich
 from bokeh.models import ColumnDataSource
 
-from engine.analysis.report import AnalysisReport
-from engine.analysis.states import PackingState
-from engine.studies import RatchetCurve
+from granlab.engine.analysis.report import AnalysisReport
+from granlab.engine.analysis.states import PackingState
+from granlab.engine.studies import RatchetCurve
 
 from .analysis import AnalysisResult
 from .plots import MODEL_COLORS, AnalysisFigures, compact, lab_figure, legend_beside

@@ -1,4 +1,4 @@
-"""Files of the lab's data folder, read and written beside the simulation (:mod:`app.jobs`).
+"""Files of the lab's data folder, read and written beside the simulation (:mod:`granlab.app.jobs`).
 
 :class:`Replay` plays a file back on a timeline. :func:`read_replay`, :func:`write_run` and
 :func:`write_lab_movie` are the functions the lab's file jobs run in a process of their own: each
@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.analysis.packing import packing_stats
-from engine.analysis.states import PackingState, StateReader, detect_format, read_state
-from engine.errors import GranLabError
-from engine.io import h5md
-from engine.io.outputs import staged
-from engine.protocols.presets import PRESETS, strain_fit
+from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.states import PackingState, StateReader, detect_format, read_state
+from granlab.engine.errors import GranLabError
+from granlab.engine.io import h5md
+from granlab.engine.io.outputs import staged
+from granlab.engine.protocols.presets import PRESETS, strain_fit
 
 from .frames import FrameData, build_frame
 
@@ -230,7 +230,7 @@ def write_lab_movie(report, path: Path, frames: list, color: str, watched: list,
                     groups: list) -> str:
     """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
     the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend, the
-    ``groups`` of disks named under them (:func:`app.frames.group_labels`)."""
+    ``groups`` of disks named under them (:func:`granlab.app.frames.group_labels`)."""
     from .render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
 
     scenes = [(build_frame([(data, (0.0, 0.0))], [watched], groups), caption) for data, caption in frames]

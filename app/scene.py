@@ -87,7 +87,7 @@ def srgb_to_linear(colors: np.ndarray) -> np.ndarray:
 _WIRE_TABLES = {field: srgb_to_linear(table) for field, table in PALETTES.items()}
 _WIRE_TABLES["contact kind"] = srgb_to_linear(np.array([color for _, color in CONTACT_KINDS]))
 _WIRE_TABLES["watched"] = srgb_to_linear(WATCHED_COLORS)
-"""The palettes of :mod:`app.drawing` as sent to viser (linear values)."""
+"""The palettes of :mod:`granlab.app.drawing` as sent to viser (linear values)."""
 
 
 def unit_cylinder(segments: int = DISK_SEGMENTS) -> tuple[np.ndarray, np.ndarray]:

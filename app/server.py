@@ -44,9 +44,9 @@ from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST
 from websockets.http11 import Request
 
-from engine.errors import GranLabError
-from engine.io.jsonsafe import jsonable
-from engine.io.outputs import check_output
+from granlab.engine.errors import GranLabError
+from granlab.engine.io.jsonsafe import jsonable
+from granlab.engine.io.outputs import check_output
 
 from .dashboard import Dashboard
 from .engine_thread import HISTORY_MIB, LabEngine
@@ -378,12 +378,14 @@ def write_presenter_address(data_dir: Path, url: str) -> Path:
     return path
 
 
-def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0):
+def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
+          program: tuple[str, ...] = (sys.executable, "-m", "granlab.app.cli"), cwd: str | Path | None = None):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
-    benchmarks and tests); returns the process, the URL it prints once serving (with tokens, the
-    presenter's, from its file) and the viewers' URL (None without tokens)."""
-    process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", "0", "--data-dir", str(data_dir),
-                                *options], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    benchmarks and tests; ``program`` the command that is ``granlab``); returns the process, the URL
+    it prints once serving (with tokens, the presenter's, from its file) and the viewers' URL (None
+    without tokens)."""
+    process = subprocess.Popen([*program, "serve", "--port", "0", "--data-dir", str(data_dir), *options],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd)
     deadline = time.time() + timeout
     viewer = None
     while time.time() < deadline:

@@ -15,7 +15,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from engine import bench
+from granlab.engine import bench
 
 
 def draw(result: dict, out: Path) -> None:

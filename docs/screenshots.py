@@ -20,9 +20,9 @@ from pathlib import Path
 from PIL import Image
 from playwright.sync_api import sync_playwright
 
-from app.dashboard import SPEEDS
-from app.server import read_status, spawn
-from engine.protocols.presets import PRESETS
+from granlab.app.dashboard import SPEEDS
+from granlab.app.server import read_status, spawn
+from granlab.engine.protocols.presets import PRESETS
 
 READY = {
     "ratchet": lambda s: s.get("cycle", 0) >= 4,

@@ -12,7 +12,7 @@
   [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
   on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
-  quasi-static and structural analysis of one frame (:mod:`engine.analysis.report`);
+  quasi-static and structural analysis of one frame (:mod:`granlab.engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
 
 Errors print one line naming what is wrong and exit with status 2.
@@ -525,8 +525,8 @@ def _analyze(args) -> dict:
 
 
 def _print_analysis(result) -> None:
-    """The rows of the report (:meth:`engine.analysis.report.AnalysisReport.rows`) that ``result``
-    (a :class:`engine.analysis.report.ReportDict`) keeps: "label: text  (note)", the texts aligned."""
+    """The rows of the report (:meth:`granlab.engine.analysis.report.AnalysisReport.rows`) that ``result``
+    (a :class:`granlab.engine.analysis.report.ReportDict`) keeps: "label: text  (note)", the texts aligned."""
     print(f"{result['analysis']} of {result['source']} ({result['particles']} disks"
           + ("" if result["forces_known"] else "; contacts from the geometry, no forces") + ")")
     law = result["law"]

@@ -1,7 +1,7 @@
 """Initial configurations: radius distributions, lattices and random non-overlapping gases.
 
 Each function returns plain arrays (positions ``(N, 2)``, radii ``(N,)``) that go into
-:class:`engine.state.ParticleState`.
+:class:`granlab.engine.state.ParticleState`.
 """
 
 from __future__ import annotations

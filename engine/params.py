@@ -49,7 +49,7 @@ TANGENTIAL = {model.name: model for model in (
     TangentialModel("lammps", 3, "LAMMPS gran/hooke/history (shear vector; Coulomb on the total normal force)",
                     "LAMMPS hooke/history", False, True, whole_step_dashpots=False))}
 """The one registry of tangential models, by name; every other list of them is made from it. The
-kernels of a model are the module of :mod:`engine.kernels.tangential` named after it."""
+kernels of a model are the module of :mod:`granlab.engine.kernels.tangential` named after it."""
 TANGENTIAL_MODELS = tuple(TANGENTIAL)
 NORMAL_MODELS = ("linear", "area")
 WALL_MODES = ("fixed", "velocity", "force")
@@ -176,7 +176,7 @@ class Integration(_Replaceable):
     """Time stepping and neighbour-list settings.
 
     - ``dt``: the time step; ``None`` means ``dt_safety`` times the stability bound
-      (see :func:`engine.simulation.stability_bound`). A ``dt`` above the bound is refused.
+      (see :func:`granlab.engine.simulation.stability_bound`). A ``dt`` above the bound is refused.
     - ``skin``: Verlet skin added to the interaction range of the neighbour list;
       ``None`` means 0.2 times the mean radius.
     - ``max_overlap``: a run whose largest overlap exceeds this fraction of the smaller

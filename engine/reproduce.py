@@ -12,12 +12,12 @@ cohesive powders prepared by methods 1 and 2, measured and set beside the publis
 
 ``z`` is Gilabert's: the mean number of interactions per disk, rattlers included (``2 M / N``).
 Without cohesion an interaction is a contact carrying at least ``1e-4 P a`` (Sec. III A, as in
-:func:`engine.analysis.packing.packing_stats`); with cohesion every contact and distant attraction
+:func:`granlab.engine.analysis.packing.packing_stats`); with cohesion every contact and distant attraction
 counts, those carrying no force included (Sec. IV A: a quarter of the contacts at ``P* = 0``).
 
 Units: the largest diameter ``a``, the mass of a disk of diameter ``a`` and ``F0`` (cohesive) or
 ``P a`` (cohesionless), so ``T0 = sqrt(m a / F0) = 1``. Samples run in parallel on Dask
-(:func:`engine.studies.run_tasks`), one thread each; a sample's numbers depend on its seed only.
+(:func:`granlab.engine.studies.run_tasks`), one thread each; a sample's numbers depend on its seed only.
 
 A reproduction given a folder writes its settings there and each sample as it finishes
 (``settings.json``, ``samples/KEY.json``); run again on that folder it runs only the samples not
@@ -171,13 +171,13 @@ class Reproduction:
     unit being ``F0`` also without cohesion, where ``P = 0.01``) bounds each stage: a sample still
     out of equilibrium then is measured as it is and counted as not equilibrated.
     ``rolling_damping_ratio`` is the damping ratio of a viscous rolling moment in the cases with RR
-    (:func:`engine.protocols.prepare.gilabert_law`). The paper has none; with 0, a disk hanging by
+    (:func:`granlab.engine.protocols.prepare.gilabert_law`). The paper has none; with 0, a disk hanging by
     one contact swings on its rolling spring for ever and the samples never meet the force
     criterion. ``cell_mass_disks``: the cell's generalized mass ``M`` (Eq. 3) is the paper's for a
     sample of that many disks (default 1400, the paper's size; see
-    :func:`engine.protocols.prepare.cell_mass`), so that every size compacts at the paper's rate;
+    :func:`granlab.engine.protocols.prepare.cell_mass`), so that every size compacts at the paper's rate;
     ``cell_mass`` is the reading of ``M`` (``mass``, 3/10 of the grain mass, or ``per-length``, that
-    over the cell size: :data:`engine.protocols.prepare.CELL_MASS_READINGS`)."""
+    over the cell size: :data:`granlab.engine.protocols.prepare.CELL_MASS_READINGS`)."""
 
     name: str
     particles: int = 100
@@ -312,7 +312,7 @@ def averaged_fit(rows: list[dict], prefix: str) -> dict:
     ``P* = 0``), with the samples' mean grid solid fraction, in units of the diameter ``a = 1``.
     Rows of a series (:func:`summarize_series`) carry their ``particles``: each size is averaged
     on its own bins, the larger boxes alone below the smaller ones' (see
-    :func:`engine.analysis.fractal.average_series_intensity`)."""
+    :func:`granlab.engine.analysis.fractal.average_series_intensity`)."""
     have = [r for r in rows if r.get(f"k{prefix}")]
     fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "error": None}
     if not have:
@@ -422,7 +422,7 @@ def finished_samples(folder) -> dict[str, dict]:
 
 
 def _sample_writer(folder, reproduction: Reproduction):
-    """``on_result`` of :func:`engine.studies.run_tasks` writing each sample into ``folder``."""
+    """``on_result`` of :func:`granlab.engine.studies.run_tasks` writing each sample into ``folder``."""
     samples = Path(folder) / SAMPLES_FOLDER
 
     def write(key: str, row: dict) -> None:
@@ -441,7 +441,7 @@ def warm_up() -> None:
 
 def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, workers: int | None = None,
                      progress=None, folder=None) -> dict:
-    """Every sample of every case on Dask (see :func:`engine.studies.run_tasks`), summarised.
+    """Every sample of every case on Dask (see :func:`granlab.engine.studies.run_tasks`), summarised.
     The cohesive cases with RR, the slowest, are submitted first. With ``folder`` (made by
     :func:`start_folder`), each sample is written there as it finishes and the samples already
     there are not run again (``resumed`` counts them; ``wall_time_s`` is this call's)."""

@@ -42,7 +42,7 @@ PARALLEL_MIN_DISKS = 1000
 
 
 def law_vector(law: ContactLaw) -> np.ndarray:
-    """The float64 vector the kernels read (indices KN, KT, ... of :mod:`engine.kernels.laws`)."""
+    """The float64 vector the kernels read (indices KN, KT, ... of :mod:`granlab.engine.kernels.laws`)."""
     vector = np.zeros(LAW_SIZE)
     vector[KN] = law.normal_stiffness
     vector[KT] = law.tangential_stiffness
@@ -217,7 +217,7 @@ class Snapshot:
     extra: dict = field(default_factory=dict)
     wall_modes: tuple[str, ...] = ()
     cell_control: tuple[str, ...] = ()
-    """Per axis: ``"none"`` (not periodic) or the cell's control (:data:`engine.params.CELL_CONTROLS`);
+    """Per axis: ``"none"`` (not periodic) or the cell's control (:data:`granlab.engine.params.CELL_CONTROLS`);
     empty: a fixed cell."""
     cell_target_stress: np.ndarray = field(default_factory=lambda: np.zeros(2))
     """sigma_aa the stress-controlled axes are driven to (compression positive)."""
@@ -440,7 +440,7 @@ class Simulation:
     def run(self, n_steps: int) -> None:
         """Advance ``n_steps`` steps of ``dt``.
 
-        Order of one step (velocity Verlet; kernels in :mod:`engine.kernels.integrate`):
+        Order of one step (velocity Verlet; kernels in :mod:`granlab.engine.kernels.integrate`):
 
         1. if the previous step predicted the skin would be used up, rebuild the contact
            table (cell list, periodic images, walls), carrying the history over;

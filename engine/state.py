@@ -204,7 +204,7 @@ class ParticleState(_Copyable):
 
 
 class WallState(_Copyable):
-    """The rigid walls as arrays (see :class:`engine.params.Wall`).
+    """The rigid walls as arrays (see :class:`granlab.engine.params.Wall`).
 
     ``offset`` is s in ``n · x = s``; ``velocity`` its rate ds/dt; ``tangential_position``
     the distance the wall surface has slid along ``t = z × n``; ``load (nw, 4)`` holds

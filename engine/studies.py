@@ -1,8 +1,8 @@
 """Studies of many samples on Dask: the ratchet study of McNamara, García-Rojo & Herrmann (Sec. IV B).
 
-Each sample is prepared once (:func:`engine.protocols.prepare.compress`) and then cycled with
+Each sample is prepared once (:func:`granlab.engine.protocols.prepare.compress`) and then cycled with
 each requested tangential model, writing one run file per model and sample. Samples run in
-parallel on a dask.distributed cluster (:func:`run_tasks`, shared with :mod:`engine.reproduce`): a
+parallel on a dask.distributed cluster (:func:`run_tasks`, shared with :mod:`granlab.engine.reproduce`): a
 local one on all cores (one single-threaded worker process per core), or an existing one given by
 its scheduler address.
 """
@@ -214,7 +214,7 @@ def _failure(study, seed, model, error) -> dict:
 def summarize(study: RatchetStudy, results: list[dict]) -> dict:
     """Per model: fraction ratcheting, geometric mean and range of |dgamma| over the ratcheting
     samples, count of each sign, how many ratchet once a rattler's jumps are taken out of the
-    series (:class:`engine.analysis.ratchet.RatchetVerdict`), and the samples."""
+    series (:class:`granlab.engine.analysis.ratchet.RatchetVerdict`), and the samples."""
     models = {}
     for model in study.models:
         rows = sorted((r for r in results if r["model"] == model), key=lambda r: r["seed"])

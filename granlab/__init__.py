@@ -17,104 +17,35 @@ Figures and the lab
     report)``, ``force_network_figure(state)``; ``lab(preset)`` the live lab in a notebook cell.
 """
 
-from __future__ import annotations
-
-from pathlib import Path
-
-from app.export import EXPORT_FORMATS
-from app.export import export_run as _export_run
-from app.notebook import NotebookLab, analysis_figure, force_network_figure, lab, show, strain_figure
-from app.render import render_run as _render_run
-from engine import (ContactLaw, DivergenceError, GranLabError, Integration, ParameterError, ParticleState,
-                    PeriodicCell, Simulation, Wall, box_walls)
-from engine.analysis import ANALYSES
-from engine.analysis.report import AnalysisReport, analyze
-from engine.analysis.states import PackingState, read_state, read_states
-from engine.io.h5md import RunWriter
-from engine.io.scene import load_scene
-from engine.params import TANGENTIAL_MODELS
-from engine.protocols import prepare
-from engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
-from engine.studies import RatchetCurve, RatchetStudy, cycle_sample, model_sim
+import importlib
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "ANALYSES", "AnalysisReport", "ContactLaw", "DivergenceError", "EXPORT_FORMATS", "GranLabError", "Integration",
-    "NotebookLab", "PRESETS", "PackingState", "ParameterError", "ParticleState", "PeriodicCell", "Preset",
-    "RatchetCurve", "Simulation", "TANGENTIAL_MODELS", "Wall", "analysis_figure", "analyze", "box_walls", "compress",
-    "export", "force_network_figure", "lab", "load_scene", "preset", "ratchet", "read", "read_all", "render",
-    "save", "show", "snapshot", "strain_figure", "table",
-]
+#: where each public name lives. Nothing is imported until it is used: ``import granlab`` is
+#: free, ``granlab.engine`` costs the engine alone, and only the lab and its figures bring panel,
+#: bokeh and matplotlib.
+_HOMES = {
+    "granlab.api": ("ANALYSES", "AnalysisReport", "ContactLaw", "DivergenceError", "GranLabError", "Integration",
+                    "PRESETS", "PackingState", "ParameterError", "ParticleState", "PeriodicCell", "Preset",
+                    "RatchetCurve", "Simulation", "TANGENTIAL_MODELS", "Wall", "analyze", "box_walls", "compress",
+                    "export", "load_scene", "preset", "ratchet", "read", "read_all", "render", "save", "snapshot",
+                    "table"),
+    "granlab.app.export": ("EXPORT_FORMATS",),
+    "granlab.app.notebook": ("NotebookLab", "analysis_figure", "force_network_figure", "lab", "show",
+                             "strain_figure"),
+}
+_HOME = {name: module for module, names in _HOMES.items() for name in names}
+
+__all__ = sorted(_HOME)
 
 
-def preset(name: str, **settings) -> Preset:
-    """The lab preset ``name`` (one of ``PRESETS``) with ``settings`` (those of the lab's controls:
-    ``particles``, ``seed``, ``friction``, ``tangential_model``...), ready to ``advance(steps)``."""
-    return make_preset(name, preset_settings(name, **settings))
+def __getattr__(name: str):
+    if name not in _HOME:
+        raise AttributeError(f"module 'granlab' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOME[name]), name)
+    globals()[name] = value
+    return value
 
 
-def compress(particles: int = 16, seed: int = 0, pressure: float = 1.0, friction: float = 0.2) -> Simulation:
-    """A biaxial box of ``particles`` disks compressed to ``pressure`` and then given ``friction``
-    (ratcheting Sec. IV B 1, paper units), in equilibrium by Gilabert's criteria."""
-    return prepare.compress(particles, seed=seed, pressure=pressure, friction=friction).sim
-
-
-def ratchet(box: Simulation, model: str = "cundall-strack", cycles: int = 40, amplitude: float = 0.2,
-            period: float = 10.0, phase: float | None = None, reference_cycle: int | None = None,
-            dt_factor: float = 0.2) -> RatchetCurve:
-    """Cycle a copy of ``box`` (from :func:`compress`; left as it is) with the tangential spring
-    ``model`` under ``q(t) = amplitude (1 - cos 2πt/period)`` (``phase`` in radians for the elliptic
-    loading): the box lengths at the start of each cycle, γ from ``reference_cycle`` (default 30 %
-    of the cycles) and the paper's verdict with the strain per cycle ``verdict.dgamma``."""
-    study = RatchetStudy(particles=box.particles.count, samples=1, cycles=cycles, models=(model,),
-                         amplitude=amplitude, period=period, phase=phase, reference_cycle=reference_cycle,
-                         dt_factor=dt_factor)
-    return cycle_sample(model_sim(box, study, model), study)
-
-
-def snapshot(sim: Simulation, source: str = "simulation") -> PackingState:
-    """The state of ``sim`` now, as every analysis reads it."""
-    return PackingState.from_snapshot(sim.snapshot(), source=source)
-
-
-def read(path, frame: int = -1, **options) -> PackingState:
-    """Frame ``frame`` of a GranLab run file, an H5MD file, a LAMMPS dump or an extended XYZ file;
-    ``options``: ``contacts`` (a LAMMPS dump local of the contacts), ``contact_columns``, ``law``
-    (e.g. ``{"friction": 0.5, "normal_stiffness": 1e3}`` for another code's file)."""
-    return read_state(path, frame, **options)
-
-
-def read_all(path, **options) -> list[PackingState]:
-    """Every frame of a file (as :func:`read`)."""
-    return read_states(path, **options)
-
-
-def save(sim: Simulation, path, overwrite: bool = False) -> Path:
-    """Write the state of ``sim`` as a run file with one frame and a checkpoint (``granlab run
-    --resume`` continues it; every command and :func:`read` read it)."""
-    with RunWriter(path, sim, protocol={"command": "granlab.save"}, overwrite=overwrite) as writer:
-        writer.write_frame(sim)
-        writer.write_checkpoint(sim)
-    return Path(path)
-
-
-def export(run_file, format: str, out, frames=None, force: bool = False) -> dict:
-    """Frames of a run file for another tool (``format`` in ``EXPORT_FORMATS``), as ``granlab export``."""
-    return _export_run(run_file, format, out, frames, force)
-
-
-def render(run_file, out, frames=None, size: str = "1280x720", color: str = "rotation", forces: bool = True,
-           fps: float = 10.0, force: bool = False) -> dict:
-    """Pictures or a movie of a run file (``.png``, ``.gif``, ``.mp4``), as ``granlab render``."""
-    return _render_run(run_file, out, frames, size, color, forces, fps, force)
-
-
-def table(report: AnalysisReport):
-    """The values of an analysis report in words (label with symbol, equation and unit; value;
-    why a value is missing), as a pandas DataFrame."""
-    import pandas
-
-    rows = report.rows()
-    return pandas.DataFrame({"value": [row.text for row in rows], "note": [row.note for row in rows]},
-                            index=pandas.Index([row.label for row in rows], name=report.kind))
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
-from engine.generate import radii, random_gas
+from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from granlab.engine.generate import radii, random_gas
 
 
 def periodic_gas(count=120, length=20.0, seed=1, speed=1.0, law=None, dt_safety=0.1, skin=None, radius_range=(0.4, 0.6)):

@@ -146,8 +146,8 @@ def text_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]
 
 def _h5md_base(path: Path) -> None:
     """A small H5MD file as other codes write it: positions of the packing in a 3D box."""
-    from engine.analysis.states import read_state
-    from engine.io import h5md
+    from granlab.engine.analysis.states import read_state
+    from granlab.engine.io import h5md
 
     state = read_state(DATA / "packing.dump")
     n = state.disks
@@ -213,7 +213,7 @@ def h5md_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]
 def run_case(case: dict, folder: Path) -> dict:
     """``granlab analyze ARGS packing --json`` in a child forked from this process (the engine
     already imported: milliseconds a case, not seconds), its memory limited and its time bounded."""
-    from engine.cli import main
+    from granlab.engine.cli import main
 
     out, err = folder / (case["name"] + ".out"), folder / (case["name"] + ".err")
     start = time.perf_counter()

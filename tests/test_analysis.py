@@ -8,15 +8,15 @@ import h5py
 import numpy as np
 import pytest
 
-from engine.analysis import stiffness as st
-from engine.analysis.packing import packing_stats, percolation_force
-from engine.analysis.report import analyze
-from engine.analysis.states import PackingState, read_state
-from engine.io.h5md import RunWriter
-from engine.params import ContactLaw
-from engine.protocols import prepare
-from engine.simulation import ContactSnapshot
-from engine.state import STATUS_STICK
+from granlab.engine.analysis import stiffness as st
+from granlab.engine.analysis.packing import packing_stats, percolation_force
+from granlab.engine.analysis.report import analyze
+from granlab.engine.analysis.states import PackingState, read_state
+from granlab.engine.io.h5md import RunWriter
+from granlab.engine.params import ContactLaw
+from granlab.engine.protocols import prepare
+from granlab.engine.simulation import ContactSnapshot
+from granlab.engine.state import STATUS_STICK
 from tests.test_cli import granlab
 
 

@@ -10,17 +10,17 @@ import re
 
 import numpy as np
 
-from engine import cli
-from engine.analysis import ANALYSES
-from engine.analysis import report as rp
-from engine.analysis import status as ss
-from engine.analysis.report import MISSING, AnalysisReport, analyze
-from engine.analysis.states import PackingState, read_state
-from engine.generate import radii as make_radii, random_gas
-from engine.io.h5md import RunWriter
-from engine.params import ContactLaw
-from engine.simulation import ContactSnapshot
-from engine.state import STATUS_SLIDE_NEG
+from granlab.engine import cli
+from granlab.engine.analysis import ANALYSES
+from granlab.engine.analysis import report as rp
+from granlab.engine.analysis import status as ss
+from granlab.engine.analysis.report import MISSING, AnalysisReport, analyze
+from granlab.engine.analysis.states import PackingState, read_state
+from granlab.engine.generate import radii as make_radii, random_gas
+from granlab.engine.io.h5md import RunWriter
+from granlab.engine.params import ContactLaw
+from granlab.engine.simulation import ContactSnapshot
+from granlab.engine.state import STATUS_SLIDE_NEG
 from tests.test_analysis import chain_state, method1_packing
 
 

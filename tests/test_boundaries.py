@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Load, ParameterError, ParticleState, PeriodicCell, Simulation, Wall, box_walls
-from engine.generate import radii, random_gas, square_lattice
+from granlab.engine import ContactLaw, Load, ParameterError, ParticleState, PeriodicCell, Simulation, Wall, box_walls
+from granlab.engine.generate import radii, random_gas, square_lattice
 
 
 def test_force_controlled_wall_balances_pressure_times_length():

@@ -20,9 +20,9 @@ from urllib.parse import parse_qs, urlparse
 import pytest
 from playwright.sync_api import expect
 
-from app.bench import resident_mib
-from app.server import TRIM_DELAY, endpoint, read_status, spawn
-from engine.protocols.presets import PRESETS
+from granlab.app.bench import resident_mib
+from granlab.app.server import TRIM_DELAY, endpoint, read_status, spawn
+from granlab.engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 if CHROMIUM is None:
@@ -119,7 +119,7 @@ def choose_preset(page, lab, name: str):
 
 def set_speed(page, lab, label: str):
     """Press the speed slider's keys until it shows ``label`` (a value of app.dashboard.SPEEDS)."""
-    from app.dashboard import SPEEDS
+    from granlab.app.dashboard import SPEEDS
 
     handle = page.locator(".speed-slider .noUi-handle")
     handle.focus()
@@ -598,7 +598,7 @@ def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_li
     protocol, any log line writes the tokens as '…'."""
     from bokeh.protocol.exceptions import ProtocolError
 
-    from app.server import mask_tokens_in_logs
+    from granlab.app.server import mask_tokens_in_logs
 
     factory = logging.getLogRecordFactory()
     try:
@@ -705,7 +705,7 @@ def test_the_lab_of_a_notebook_cell_runs_in_its_frame(page, tmp_path):
     import http.server
     import threading
 
-    from app.notebook import NotebookLab
+    from granlab.app.notebook import NotebookLab
 
     live = NotebookLab("ratchet16", data_dir=tmp_path / "data")
     (tmp_path / "cell.html").write_text(f"<html><body><h3>In [1]: live</h3>{live._repr_html_()}</body></html>")

@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from engine.params import TANGENTIAL_MODELS
+from granlab.engine.params import TANGENTIAL_MODELS
 
 
 def granlab(*args, check=True):
-    process = subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True,
+    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
                              timeout=600)
     if check and process.returncode != 0:
         raise AssertionError(process.stderr)
@@ -147,7 +147,7 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     (["reproduce", "gilabert-method1", "--max-time", "1e300"], "max_time = 1e+300 is not allowed: a duration > 0 and at most"),
 ])
 def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, monkeypatch, args, message):
-    from engine import cli
+    from granlab.engine import cli
 
     monkeypatch.chdir(tmp_path)
     assert cli.main(args + ["--out", str(tmp_path / "out")]) == 2
@@ -157,7 +157,7 @@ def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, 
 
 
 def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
-    from engine import cli, reproduce
+    from granlab.engine import cli, reproduce
 
     failed = [{"case": "noncohesive", "seed": seed, "error": "DivergenceError: overlap"} for seed in (0, 1)]
     monkeypatch.setattr(reproduce, "run_reproduction", lambda *a, **k: {"failed": failed, "samples": failed})
@@ -168,7 +168,7 @@ def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
 def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, capsys):
     import h5py
 
-    from engine import cli
+    from granlab.engine import cli
 
     scene = tmp_path / "pair.toml"
     scene.write_text(PAIR)
@@ -203,7 +203,7 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
             ("--port", "0", "--history-mib", "nan"): "--history-mib nan is not allowed",
         }
         for args, message in refusals.items():
-            process = subprocess.run([sys.executable, "-m", "app.cli", "serve", *args], capture_output=True,
+            process = subprocess.run([sys.executable, "-m", "granlab.app.cli", "serve", *args], capture_output=True,
                                      text=True, timeout=120)
             assert process.returncode == 2 and process.stderr.count("\n") == 1, (args, process.stderr)
             assert process.stderr.startswith(f"granlab serve: error: {message}"), (args, process.stderr)
@@ -213,7 +213,7 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
 
 
 def test_bench_scaling_reports_each_size_with_its_memory_and_rebuild_share():
-    from engine import bench
+    from granlab.engine import bench
 
     result = bench.scaling(sides=(6, 12), steps=300)
     assert [row["particles"] for row in result["sizes"]] == [36, 144]
@@ -241,7 +241,7 @@ def test_output_cut_short_by_its_reader_ends_without_a_traceback():
     """``granlab analyze ... | head -1`` printed a BrokenPipeError traceback under the line. Here
     the reader is gone before the first line is written."""
     read, write = os.pipe()
-    process = subprocess.Popen([sys.executable, "-m", "engine.cli", "analyze", "tests/data/lammps/packing.dump",
+    process = subprocess.Popen([sys.executable, "-m", "granlab.engine.cli", "analyze", "tests/data/lammps/packing.dump",
                                 "packing"], stdout=write, stderr=subprocess.PIPE, text=True,
                                cwd=os.path.dirname(os.path.dirname(__file__)))
     os.close(write)

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from engine.protocols import prepare
-from engine.protocols.equilibrium import measured_pressure
+from granlab.engine.protocols import prepare
+from granlab.engine.protocols.equilibrium import measured_pressure
 
 STRICT_OVERLAP = 0.15
 """Twice the largest overlap of a compressed box at rest (0.077 of a radius with 64 disks)."""
@@ -35,8 +35,9 @@ def test_compression_overlaps_no_disk_much_deeper_than_at_rest(monkeypatch, capf
 
 def test_prepare_reports_progress_on_stderr_and_keeps_stdout_for_the_result(tmp_path):
     out = tmp_path / "box.h5"
-    process = subprocess.run([sys.executable, "-m", "engine.cli", "prepare", "--method", "compress", "--particles",
-                              "400", "--out", str(out), "--json"], capture_output=True, text=True, timeout=600)
+    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "prepare", "--method", "compress",
+                              "--particles", "400", "--out", str(out), "--json"], capture_output=True, text=True,
+                             timeout=600)
     assert process.returncode == 0, process.stderr
     result = json.loads(process.stdout)
     assert result["equilibrated"] and result["wall_time_s"] > 2.0

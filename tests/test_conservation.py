@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, Simulation, Wall, box_walls
-from engine.generate import radii, random_gas
+from granlab.engine import ContactLaw, Integration, ParticleState, Simulation, Wall, box_walls
+from granlab.engine.generate import radii, random_gas
 
 from .conftest import periodic_gas
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, Simulation, Wall
-from engine.protocols import teaching
-from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from granlab.engine import ContactLaw, Integration, ParticleState, Simulation, Wall
+from granlab.engine.protocols import teaching
+from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 from .conftest import periodic_gas
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from engine import (ContactLaw, DivergenceError, Integration, ParameterError, ParticleState, SceneError,
-                    Simulation, Wall, box_walls)
-from engine.io.scene import parse_scene
+from granlab.engine import (ContactLaw, DivergenceError, Integration, ParameterError, ParticleState, SceneError,
+                            Simulation, Wall, box_walls)
+from granlab.engine.io.scene import parse_scene
 
 
 @pytest.mark.parametrize("field,value,allowed", [

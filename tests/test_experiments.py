@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from engine.protocols import teaching
+from granlab.engine.protocols import teaching
 
 
 @pytest.mark.parametrize("zeta", [0.0, 0.3, 0.7])
@@ -72,10 +72,10 @@ def test_one_registry_names_the_tangential_models_for_the_kernels_the_command_li
     """engine.params.TANGENTIAL is the only list of the models: the kernels' modules and codes, the choices of
     the command line and the lab, and the closed path's prediction (Eq. 17's residue only for a
     path-dependent spring) come from it."""
-    from engine.cli import build_parser
-    from engine.kernels import tangential
-    from engine.params import TANGENTIAL, TANGENTIAL_MODELS
-    from engine.protocols.settings import LabSettings
+    from granlab.engine.cli import build_parser
+    from granlab.engine.kernels import tangential
+    from granlab.engine.params import TANGENTIAL, TANGENTIAL_MODELS
+    from granlab.engine.protocols.settings import LabSettings
 
     codes = [model.code for model in TANGENTIAL.values()]
     assert TANGENTIAL_MODELS == tuple(TANGENTIAL) and len(set(codes)) == len(codes)

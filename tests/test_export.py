@@ -11,21 +11,22 @@ import xml.etree.ElementTree as ElementTree
 import numpy as np
 import pytest
 
-from app.export import contacts_dump_name
-from app.frames import FrameData, build_frame
-from engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
-from engine.analysis import stiffness as st
-from engine.analysis.packing import packing_stats
-from engine.analysis.states import read_state
-from engine.generate import radii, random_gas
-from engine.io import h5md
+from granlab.app.export import contacts_dump_name
+from granlab.app.frames import FrameData, build_frame
+from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from granlab.engine.analysis import stiffness as st
+from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.states import read_state
+from granlab.engine.generate import radii, random_gas
+from granlab.engine.io import h5md
 
 FRAMES = 3
 
 
 def granlab(*args, check=True):
     """The ``granlab`` command (with the lab's commands) in a process of its own."""
-    process = subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=600)
+    process = subprocess.run([sys.executable, "-m", "granlab.app.cli", *args], capture_output=True, text=True,
+                             timeout=600)
     if check and process.returncode != 0:
         raise AssertionError(process.stderr)
     return process
@@ -211,7 +212,7 @@ def test_bad_exports_get_one_line_and_exit_2(run_file, tmp_path):
 
 STALLED = """
 import sys, time
-from engine.io import h5md
+from granlab.engine.io import h5md
 read = h5md.read_frame
 def stalled(f, index):
     if index > 0:
@@ -219,7 +220,7 @@ def stalled(f, index):
         time.sleep(600)
     return read(f, index)
 h5md.read_frame = stalled
-from app.cli import main
+from granlab.app.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -263,7 +264,7 @@ def test_an_export_or_render_that_runs_out_of_room_says_so_in_one_line_and_leave
         run_file, tmp_path, command, out):
     """Under a file size limit as on a full disk (a real full tmpfs gave tracebacks, exit 1; the
     h5md export a segfault after 265 KB of them; the mp4 a broken file and exit 0)."""
-    process = subprocess.run([sys.executable, "-m", "app.cli", command[0], str(run_file), *command[1:], "--out",
+    process = subprocess.run([sys.executable, "-m", "granlab.app.cli", command[0], str(run_file), *command[1:], "--out",
                               str(tmp_path / out), "--frames", ":"], capture_output=True, text=True, timeout=600,
                              preexec_fn=_small_file_limit)
     lines = [line for line in process.stderr.splitlines() if not line.startswith(("rendering frame", "exporting frame"))]

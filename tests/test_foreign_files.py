@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.analysis import stiffness as st
-from engine.analysis.packing import packing_stats
-from engine.analysis.states import read_state
-from engine.io.lammps import Dump
+from granlab.engine.analysis import stiffness as st
+from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.states import read_state
+from granlab.engine.io.lammps import Dump
 from tests.test_cli import granlab
 
 DATA = Path(__file__).parent / "data" / "lammps"

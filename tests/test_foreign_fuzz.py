@@ -3,7 +3,7 @@ truncations, flipped bytes, zeroed pages, deleted or repeated lines, swapped or 
 huge counts and shapes, NaN, inf and huge values, negative radii, duplicate ids, junk) read by
 ``granlab analyze`` (:mod:`tests.foreign_fuzz`): each ends within its deadline in a one-line error
 (exit 2) or a result, never in a traceback, a hang or a memory limit, and a result that is not a
-packing is said not to be one (:mod:`engine.analysis.plausibility`). Before this check 31 of the
+packing is said not to be one (:mod:`granlab.engine.analysis.plausibility`). Before this check 31 of the
 420 ended in a traceback (4 of them allocating 8.9 GiB for a declared shape) or printed warnings
 before their message."""
 

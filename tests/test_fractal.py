@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import scipy.special
 
-from engine.analysis.fractal import (MAX_CELLS, FitError, curdled_packing, default_spacing, density_field,
-                                     fit_structure, fractal_analysis, grid_shape, hole_radii, structure_factor,
-                                     structure_model, weighted_hole_radius)
-from engine.errors import GranLabError, ParameterError
-from engine.generate import radii as make_radii, random_gas
+from granlab.engine.analysis.fractal import (MAX_CELLS, FitError, curdled_packing, default_spacing, density_field,
+                                             fit_structure, fractal_analysis, grid_shape, hole_radii, structure_factor,
+                                             structure_model, weighted_hole_radius)
+from granlab.engine.errors import GranLabError, ParameterError
+from granlab.engine.generate import radii as make_radii, random_gas
 
 BLOB_GENERATIONS = 4
 BLOBS = 30

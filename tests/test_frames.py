@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from app.drawing import LABEL_SIZE, frame_bounds
-from app.frames import FrameData, build_frame
-from engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_STICK
+from granlab.app.drawing import LABEL_SIZE, frame_bounds
+from granlab.app.frames import FrameData, build_frame
+from granlab.engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_STICK
 
 
 def three_disks_on_a_floor():
@@ -64,7 +64,7 @@ def test_frame_from_a_live_simulation_matches_its_snapshot():
     """The lean copy the engine thread takes gives the frame a full snapshot gives, and the
     frame's contact segments have the lengths the contact table implies (r_i + r_j + gap for
     a pair, r_i + gap to a wall)."""
-    from engine.protocols.presets import make_preset, preset_settings
+    from granlab.engine.protocols.presets import make_preset, preset_settings
 
     preset = make_preset("ratchet16", preset_settings("ratchet16"))
     while preset.sim.time < 12.0:  # past the compression ramp: a packed box
@@ -85,5 +85,5 @@ def test_frame_from_a_live_simulation_matches_its_snapshot():
     partner = np.where(c.j < n, snap.radii[np.minimum(c.j, n - 1)], 0.0)
     length = np.linalg.norm(b.contacts[:, 1] - b.contacts[:, 0], axis=1)
     np.testing.assert_allclose(length, snap.radii[c.i] + partner + c.surface_gap, rtol=1e-9)
-    from app.frames import contact_fields
+    from granlab.app.frames import contact_fields
     assert len(contact_fields.signatures) == 1  # hand-built, snapshot and live arrays: one compilation

@@ -13,8 +13,8 @@ import h5py
 import numpy as np
 import pytest
 
-from engine.io import h5md
-from engine.io.scene import parse_scene
+from granlab.engine.io import h5md
+from granlab.engine.io.scene import parse_scene
 
 SCENE = """
 title = "loaded box"
@@ -95,8 +95,8 @@ def test_layout_follows_h5md_and_a_plain_h5py_reader_rebuilds_the_state(tmp_path
 
 WRITER = textwrap.dedent("""
     import sys
-    from engine.io import h5md
-    from engine.io.scene import parse_scene
+    from granlab.engine.io import h5md
+    from granlab.engine.io.scene import parse_scene
     sys.path.insert(0, {tests!r})
     from test_h5md import SCENE
     sim = parse_scene(SCENE).build()
@@ -159,7 +159,7 @@ def test_a_damaged_file_of_a_killed_writer_is_named_in_one_line_and_never_waited
     path.write_bytes(_damage(killed_run.read_bytes(), how))
     for command in (["info", str(path)], ["analyze", str(path), "packing"]):
         start = time.perf_counter()
-        process = subprocess.run([sys.executable, "-m", "engine.cli", *command], capture_output=True, text=True,
+        process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *command], capture_output=True, text=True,
                                  timeout=60)
         assert time.perf_counter() - start < 20.0
         if how == "whole":
@@ -173,8 +173,8 @@ def test_a_damaged_file_of_a_killed_writer_is_named_in_one_line_and_never_waited
 
 READERS = textwrap.dedent("""
     import sys
-    from engine.analysis.states import read_state
-    from engine.io import h5md
+    from granlab.engine.analysis.states import read_state
+    from granlab.engine.io import h5md
     for reader in (h5md.summary, read_state, h5md.resume):
         try:
             reader(sys.argv[1])
@@ -230,7 +230,7 @@ def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
     scene_file.write_text(SCENE)
 
     def cli(*args):
-        process = subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True,
+        process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
                                  timeout=600)
         assert process.returncode == 0, process.stderr
         return json.loads(process.stdout)
@@ -250,7 +250,7 @@ def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
 
 FULL_DISK = """
 import os, sys
-from engine.cli import main
+from granlab.engine.cli import main
 real = os.statvfs
 CAPACITY = int(sys.argv[1])
 
@@ -284,7 +284,7 @@ def test_a_run_stopped_by_a_full_disk_says_so_in_one_line_and_its_file_resumes(t
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     out = tmp_path / "full.h5"
-    command = ["engine.cli"] if full == "file size limit" else [FULL_DISK, str(limit)]
+    command = ["granlab.engine.cli"] if full == "file size limit" else [FULL_DISK, str(limit)]
     process = subprocess.run([sys.executable, "-m" if full == "file size limit" else "-c", *command, "run",
                               str(scene_file), "--out", str(out)],
                              capture_output=True, text=True, timeout=600, preexec_fn=small_disk)
@@ -300,7 +300,7 @@ def test_a_run_stopped_by_a_full_disk_says_so_in_one_line_and_its_file_resumes(t
         steps = f["particles/all/position/step"][:h5md.frame_count(f)]
         assert steps[0] == 0 and np.all(np.diff(steps) == 50) and checkpoint <= steps[-1] < failed_at
         assert h5md.read_checkpoint(f)["step"] == checkpoint
-    resumed = subprocess.run([sys.executable, "-m", "engine.cli", "run", "--resume", str(out), "--json"],
+    resumed = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", "--resume", str(out), "--json"],
                              capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr
     assert json.loads(resumed.stdout)["steps"] == 4000
@@ -327,7 +327,8 @@ def test_bad_run_files_give_clear_errors(tmp_path):
     with h5md.open_run(tmp_path / "nockpt.h5") as f:
         with pytest.raises(h5md.RunFileError, match=r"frame 5 is out of range: .* holds frames 0..0"):
             h5md.read_frame(f, 5)
-    process = subprocess.run([sys.executable, "-m", "engine.cli", "info", str(text)], capture_output=True, text=True)
+    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "info", str(text)], capture_output=True,
+                             text=True)
     assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
 
 
@@ -335,7 +336,7 @@ def test_a_killed_cli_run_resumes_from_its_last_periodic_checkpoint_bit_for_bit(
     scene_file = tmp_path / "long.toml"
     scene_file.write_text(SCENE.replace("steps = 4000", "steps = 400000\nrecord_every = 4000"))
     crash = tmp_path / "crash.h5"
-    command = [sys.executable, "-m", "engine.cli", "run", str(scene_file), "--json"]
+    command = [sys.executable, "-m", "granlab.engine.cli", "run", str(scene_file), "--json"]
     process = subprocess.Popen(command + ["--out", str(crash), "--checkpoint-every", "2"], stdout=subprocess.DEVNULL)
     deadline = time.monotonic() + 120.0
     step = 0
@@ -362,7 +363,7 @@ def test_a_diverging_cli_run_writes_its_restored_last_good_state_as_the_last_che
     scene_file = tmp_path / "heavy.toml"
     scene_file.write_text(SCENE.replace("gravity = [0.0, -1.0]", "gravity = [0.0, -3e3]"))
     out = tmp_path / "heavy.h5"
-    process = subprocess.run([sys.executable, "-m", "engine.cli", "run", str(scene_file), "--out", str(out),
+    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", str(scene_file), "--out", str(out),
                               "--frame-every", "10", "--checkpoint-every", "4"], capture_output=True, text=True,
                              timeout=600)
     assert process.returncode == 2

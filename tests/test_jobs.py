@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from app.jobs import Jobs
-from engine.errors import GranLabError
+from granlab.app.jobs import Jobs
+from granlab.engine.errors import GranLabError
 
 
 def counting(report, count):

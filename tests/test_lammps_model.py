@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, Simulation
-from engine.io.lammps import Dump
+from granlab.engine import ContactLaw, Integration, ParticleState, Simulation
+from granlab.engine.io.lammps import Dump
 
 IMPACTS = Path(__file__).parent / "data" / "lammps" / "impacts"
 RECORD = json.loads((IMPACTS / "cases.json").read_text())

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from engine.kernels import laws
-from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from granlab.engine.kernels import laws
+from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 
 def lens_area_reference(ri, rj, d):

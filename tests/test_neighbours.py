@@ -5,8 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation, Wall
-from engine.generate import radii, random_gas
+from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation, Wall
+from granlab.engine.generate import radii, random_gas
 
 
 def brute_force_pairs(position, radius, lengths, periodic, extra):

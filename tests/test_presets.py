@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from engine import ParameterError
-from engine.protocols.measures import PairMaximum, mobilisation
-from engine.protocols.presets import PRESETS, make_preset, preset_settings
-from engine.protocols.settings import LabSettings
-from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
+from granlab.engine import ParameterError
+from granlab.engine.protocols.measures import PairMaximum, mobilisation
+from granlab.engine.protocols.presets import PRESETS, make_preset, preset_settings
+from granlab.engine.protocols.settings import LabSettings
+from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 
 def run_until(preset, predicate, steps=200, limit=400_000):

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from engine import ContactLaw, ParameterError, ParticleState, PeriodicCell, Simulation, box_walls
-from engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
-from engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
-from engine.protocols.equilibrium import equilibrium, measured_pressure
-from engine.protocols.prepare import gilabert_gas, cell_mass, clusters, compress, gilabert_law, method1, method2
+from granlab.engine import ContactLaw, ParameterError, ParticleState, PeriodicCell, Simulation, box_walls
+from granlab.engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
+from granlab.engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
+from granlab.engine.protocols.equilibrium import equilibrium, measured_pressure
+from granlab.engine.protocols.prepare import gilabert_gas, cell_mass, clusters, compress, gilabert_law, method1, method2
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_cyclic_load_is_ratcheting_eq1_and_cycles_are_whole_steps(box16):
     start = apply_load(sim, load)
     steps = steps_per_cycle(sim, load)
     assert steps * sim.dt == pytest.approx(10.0, rel=1e-12)
-    from engine.kernels.integrate import wall_load
+    from granlab.engine.kernels.integrate import wall_load
     top = sim.wall_index("top")
     lx = sim.box_lengths()[0]
     w = sim.walls.arrays()

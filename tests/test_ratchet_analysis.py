@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from engine import ParameterError
-from engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
+from granlab.engine import ParameterError
+from granlab.engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
 
 
 def test_deviatoric_strain_is_eq2():

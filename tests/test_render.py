@@ -9,12 +9,12 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
-                         WATCHED_COLORS, SceneFrame, disk_colors)
-from app.render import default_movie_frames, render_image, run_frames, write_movie
-from engine.io import h5md
-from engine.io.scene import parse_scene
+from granlab.app.cli import main
+from granlab.app.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
+                                 WATCHED_COLORS, SceneFrame, disk_colors)
+from granlab.app.render import default_movie_frames, render_image, run_frames, write_movie
+from granlab.engine.io import h5md
+from granlab.engine.io.scene import parse_scene
 
 PILE = """
 title = "a cohesive pile settling between two walls"

@@ -16,18 +16,19 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from engine import ParameterError
-from engine.cli import _print_reproduce
-from engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
-                              TABLE_VII, Case, Published, Reproduction, gilabert_sample, published, resume_folder,
-                              run_reproduction, sample_key, start_folder, summarize)
+from granlab.engine import ParameterError
+from granlab.engine.cli import _print_reproduce
+from granlab.engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
+                                      TABLE_VII, Case, Published, Reproduction, gilabert_sample, published,
+                                      resume_folder, run_reproduction, sample_key, start_folder, summarize)
 
 PAPER = Path(__file__).resolve().parents[2] / "shared" / "papers" / "003_8b3722194af85a9b.txt"
 NUMBER = re.compile(r"\d+\.\d+")
 
 
 def granlab(*args):
-    return subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+                          timeout=300)
 
 
 def _numbers(line):
@@ -170,7 +171,7 @@ def test_bad_input_is_refused_clearly():
 
 
 def test_a_failed_fit_keeps_the_hole_radius():
-    from engine.reproduce import _fractal
+    from granlab.engine.reproduce import _fractal
 
     # a square lattice of overlapping disks with one disk in nine missing: no fractal range, and
     # holes no wider than a missing disk with its four interstices
@@ -187,7 +188,7 @@ def test_a_failed_fit_keeps_the_hole_radius():
 
 
 def test_intensities_of_boxes_of_different_sizes_are_averaged_on_common_bins():
-    from engine.analysis.fractal import average_intensity, fit_structure, structure_model
+    from granlab.engine.analysis.fractal import average_intensity, fit_structure, structure_model
 
     phi, d_F, xi, ell, constant = 0.3, 1.6, 8.0, 0.5, 2e-3
     # two samples' bins: shells 2 pi / L wide, boxes 10 % apart, the second with 10 % more intensity
@@ -204,7 +205,7 @@ def test_intensities_of_boxes_of_different_sizes_are_averaged_on_common_bins():
 
 
 def test_a_series_of_two_box_sizes_reaches_below_the_smaller_box_with_the_larger_alone():
-    from engine.analysis.fractal import average_intensity, average_series_intensity, structure_model
+    from granlab.engine.analysis.fractal import average_intensity, average_series_intensity, structure_model
 
     phi, d_F, xi, ell, constant = 0.36, 1.6, 8.0, 0.5, 2e-3
     small, large = (np.geomspace(2.0 * math.pi / length, 6.0, 40) for length in (42.0, 84.0))
@@ -225,8 +226,8 @@ def test_a_series_of_two_box_sizes_reaches_below_the_smaller_box_with_the_larger
 
 def _series_folder(folder, particles, samples, length, **settings):
     """A method-2 folder of ``samples`` per case whose I(k) is Eq. 28's in boxes ``length`` wide."""
-    from engine.analysis.fractal import structure_model
-    from engine.reproduce import _write_json
+    from granlab.engine.analysis.fractal import structure_model
+    from granlab.engine.reproduce import _write_json
 
     reproduction = Reproduction("gilabert-method2", particles=particles, samples=samples, **settings)
     start_folder(folder, reproduction)
@@ -275,7 +276,7 @@ def test_folders_of_two_sizes_are_summarised_as_one_series(tmp_path):
 
 def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     folder = tmp_path / "method2"
-    command = [sys.executable, "-m", "engine.cli", "reproduce", "gilabert-method2", "--particles", "30",
+    command = [sys.executable, "-m", "granlab.engine.cli", "reproduce", "gilabert-method2", "--particles", "30",
                "--samples", "2", "--max-time", "40", "--workers", "1", "--json"]
     process = subprocess.Popen([*command, "--out", str(folder)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True, start_new_session=True)

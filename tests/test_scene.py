@@ -14,21 +14,21 @@ import viser
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-import app.drawing as drawing
-import app.scene as scene
-from app.drawing import (
-    COLOR_FIELDS,
-    COORDINATION_COLORS,
-    FORCE_CLASSES,
-    PRESSURE_LUT,
-    ROTATION_LUT,
-    SLIDING_DISK_COLORS,
-    WATCHED_COLORS,
-    SceneFrame,
-    force_class_thickness,
-    force_classes,
-)
-from app.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
+import granlab.app.drawing as drawing
+import granlab.app.scene as scene
+from granlab.app.drawing import (
+                                 COLOR_FIELDS,
+                                 COORDINATION_COLORS,
+                                 FORCE_CLASSES,
+                                 PRESSURE_LUT,
+                                 ROTATION_LUT,
+                                 SLIDING_DISK_COLORS,
+                                 WATCHED_COLORS,
+                                 SceneFrame,
+                                 force_class_thickness,
+                                 force_classes,
+                                 )
+from granlab.app.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
 
 
 def small_frame(n=4, cell=(6.0, 4.0)):

@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
-                                       network)
-from engine.params import ContactLaw
-from engine.protocols.prepare import gilabert_law, method1
-from engine.protocols.presets import make_preset, preset_settings
-from engine.simulation import Simulation
-from engine.state import (CELL_STRAIN_RATE, CELL_STRESS, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, WALL_FORCE, WALL_VELOCITY,
-                          ParticleState)
+from granlab.engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
+                                               network)
+from granlab.engine.params import ContactLaw
+from granlab.engine.protocols.prepare import gilabert_law, method1
+from granlab.engine.protocols.presets import make_preset, preset_settings
+from granlab.engine.simulation import Simulation
+from granlab.engine.state import (CELL_STRAIN_RATE, CELL_STRESS, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, WALL_FORCE,
+                                  WALL_VELOCITY, ParticleState)
 
 
 @functools.cache
@@ -152,8 +152,8 @@ def test_the_sparse_solve_and_mechanisms_agree_with_the_dense_ones(monkeypatch):
     symmetric ordering) and ARPACK: forced onto that path, the 16-disk box with 19 of its 37
     contacts sliding (k not symmetric) gives the dense answers, and so does the enumeration of the
     2^5 states of five of its critical contacts."""
-    from engine.analysis import status as ss
-    from engine.analysis import stiffness as st
+    from granlab.engine.analysis import status as ss
+    from granlab.engine.analysis import stiffness as st
 
     net = turned_box(3, 1)
     load = deviatoric_load(net)
@@ -236,7 +236,7 @@ def test_exactly_one_contact_state_is_consistent(seed):
     """Quasi-rigidity Sec. II D on small packings: every state is stable here (checked), so the
     consistency map C must be a bijection of {0,1}^M_c and exactly one state obey the principle of
     minimum sliding; the iterative solver and the dynamics find that state."""
-    from engine.analysis.status import critical_contacts, enumerate_states, solve_status
+    from granlab.engine.analysis.status import critical_contacts, enumerate_states, solve_status
 
     net = turned_box(1, seed)
     critical = critical_contacts(net)
@@ -255,7 +255,7 @@ def test_mechanisms_of_a_free_triangle_are_its_rigid_motions_and_a_net_force_col
     motions as null modes of k; a self-balanced load (two disks pulled apart along their line)
     leaves them unexcited, a net force excites one (no quasi-static solution: collapse). A fourth,
     distant disk adds three rattler modes."""
-    from engine.analysis.stiffness import mechanisms
+    from granlab.engine.analysis.stiffness import mechanisms
 
     d = 2.0 - 1e-6
     triangle = [(0.0, 0.0), (d, 0.0), (d / 2, d * math.sqrt(3) / 2)]
@@ -323,8 +323,8 @@ def test_k_with_the_cells_two_strain_degrees_of_freedom_predicts_the_engines_for
     assert np.linalg.norm(df[: 3 * n] + fixed_cell) > 0.1 * np.linalg.norm(df[: 3 * n])
 
     # the run file carries the cell's control and target: the analysis of the file sees the same bodies
-    from engine.analysis.states import read_state
-    from engine.io.h5md import RunWriter
+    from granlab.engine.analysis.states import read_state
+    from granlab.engine.io.h5md import RunWriter
 
     with RunWriter(tmp_path / "cell.h5", sim) as writer:
         writer.write_frame(snap)
@@ -335,8 +335,8 @@ def test_k_with_the_cells_two_strain_degrees_of_freedom_predicts_the_engines_for
     counts = rigidity(net)
     assert counts.degrees_of_freedom == 3 * n + 2 and counts.balanced
 
-    from engine.analysis.report import load_increment
-    from engine.errors import GranLabError
+    from granlab.engine.analysis.report import load_increment
+    from granlab.engine.errors import GranLabError
 
     increment, kind = load_increment(net, "cell")
     assert kind == "cell" and np.flatnonzero(increment).tolist() == [3 * n, 3 * n + 1]

@@ -7,14 +7,15 @@ import sys
 import numpy as np
 import pytest
 
-from engine import ParameterError
-from engine.io import h5md
-from engine.params import TANGENTIAL
-from engine.studies import RatchetStudy, ratchet_sample, summarize
+from granlab.engine import ParameterError
+from granlab.engine.io import h5md
+from granlab.engine.params import TANGENTIAL
+from granlab.engine.studies import RatchetStudy, ratchet_sample, summarize
 
 
 def granlab(*args):
-    return subprocess.run([sys.executable, "-m", "engine.cli", *args], capture_output=True, text=True, timeout=900)
+    return subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+                          timeout=900)
 
 
 def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):

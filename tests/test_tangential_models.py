@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from engine import ContactLaw, Integration, ParticleState, Simulation
-from engine.params import TANGENTIAL
-from engine.protocols import teaching
+from granlab.engine import ContactLaw, Integration, ParticleState, Simulation
+from granlab.engine.params import TANGENTIAL
+from granlab.engine.protocols import teaching
 
 from .conftest import periodic_gas
 

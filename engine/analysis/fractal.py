@@ -427,7 +427,7 @@ def _label_moments(labels, count, sum_i, sum_j, sum_ii, sum_jj):
 
 def _periodic_images(labels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Join the labels that touch across the periodic edges (union-find that keeps the periodic
-    image of each label relative to its root, as :func:`engine.analysis.packing.percolation_force`
+    image of each label relative to its root, as :func:`granlab.engine.analysis.packing.percolation_force`
     does for disks). Returns per label its root, its image ``(s_x, s_y)`` (its cells sit at
     ``(i + s_x nx, j + s_y ny)`` in the unwrapped hole) and whether its hole wraps around the box."""
     size = int(labels.max()) + 1

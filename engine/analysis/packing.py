@@ -1,7 +1,7 @@
 """Packing statistics of a state (Gilabert Secs. III-IV): solid fraction, coordination, rattlers,
 local coordinations, force distributions, the Rumpf relation and the force-percolation threshold.
 
-A state is a :class:`engine.simulation.Snapshot` or an :class:`engine.analysis.states.PackingState`.
+A state is a :class:`granlab.engine.simulation.Snapshot` or an :class:`granlab.engine.analysis.states.PackingState`.
 Forces follow the engine's conventions: ``N`` (total normal force, > 0 repulsive) along ``n``
 from j to i, ``T`` along ``t = z × n``.
 """

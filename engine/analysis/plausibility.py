@@ -18,7 +18,7 @@ UNBALANCED_SHARE = 0.1
 
 
 def implausible(state) -> list[str]:
-    """What makes ``state`` (:class:`engine.analysis.states.PackingState`) unphysical, one line each."""
+    """What makes ``state`` (:class:`granlab.engine.analysis.states.PackingState`) unphysical, one line each."""
     findings = []
     n = state.disks
     phi = solid_fraction(state)

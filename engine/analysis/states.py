@@ -1,9 +1,9 @@
 """The state the analyses read: from a live simulation, a GranLab run file, any H5MD file, a
 LAMMPS dump or an extended XYZ file.
 
-:class:`PackingState` holds what :mod:`engine.analysis.stiffness`, :mod:`engine.analysis.packing` and
-:mod:`engine.analysis.fractal` need, under the attribute names of
-:class:`engine.simulation.Snapshot` (so a snapshot serves as well).
+:class:`PackingState` holds what :mod:`granlab.engine.analysis.stiffness`, :mod:`granlab.engine.analysis.packing` and
+:mod:`granlab.engine.analysis.fractal` need, under the attribute names of
+:class:`granlab.engine.simulation.Snapshot` (so a snapshot serves as well).
 
 A GranLab run file gives everything, contact forces and statuses included; the contact law and
 the wall modes of the frame come from ``/observables/law`` and ``/observables/walls/mode`` (files
@@ -90,7 +90,7 @@ extended XYZ."""
 
 SLIDING_TOLERANCE = 1e-6
 """A contact read from another code slides when |F_t| >= (1 - this) mu F_n (the same tolerance as
-:func:`engine.analysis.status.critical_contacts`)."""
+:func:`granlab.engine.analysis.status.critical_contacts`)."""
 
 CONTACT_NAMES = {"id1": ("id1", "patom1"), "id2": ("id2", "patom2"), "fx": ("fx", "fnx"), "fy": ("fy", "fny"),
                  "ftx": ("ftx",), "fty": ("fty",)}

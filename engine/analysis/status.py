@@ -2,7 +2,7 @@
 the contacts on the Coulomb cone, the consistency map C of their statuses (Eq. 5) from the response
 of k to a load increment, the consistent state found by flipping statuses (minimum sliding), and
 for a few critical contacts every one of their 2^M_c states with its stability (Eqs. 41-45).
-Built on the stiffness matrix of :mod:`engine.analysis.stiffness`.
+Built on the stiffness matrix of :mod:`granlab.engine.analysis.stiffness`.
 """
 
 from __future__ import annotations

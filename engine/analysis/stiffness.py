@@ -15,7 +15,7 @@ positive). Its load is ``-sigma^M_aa A / L_a``, the target stress pressing the c
 contacts do not deform with the cell. The terms of the pre-stress (the turn of n, and A changing
 with L) are left out here as for the disks: they are of order N^e/(K_n r) against those kept.
 
-Contacts follow the engine's conventions (:mod:`engine.kernels.laws`, :mod:`engine.kernels.contacts`):
+Contacts follow the engine's conventions (:mod:`granlab.engine.kernels.laws`, :mod:`granlab.engine.kernels.contacts`):
 ``n`` points from j to i (from a wall into its disk), ``t = z × n``, ``F_n > 0`` repels,
 ``V_n = (v_i - v_j)·n`` and ``V_t = alpha (v_i - v_j)·t - r_i w_i - r_j w_j`` (``alpha = 1`` for the
 Cundall-Strack spring, ``(r_i + r_j)/|r_ij|`` for the alpha-corrected and angle-based ones,
@@ -129,7 +129,7 @@ def _tangent_normal_stiffness(law, overlap, ri, rj, is_wall) -> np.ndarray:
 
 
 def network(snapshot, cell_lengths=None) -> Network:
-    """The :class:`Network` of an :class:`engine.simulation.Snapshot`.
+    """The :class:`Network` of an :class:`granlab.engine.simulation.Snapshot`.
 
     Force-mode walls are bodies; their load is taken as what balances the disks' push
     (``-wall_forces``), the load of a packing in equilibrium.

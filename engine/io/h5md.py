@@ -473,7 +473,7 @@ def open_run(path: str | Path) -> h5py.File:
     Without SWMR, which finds a truncated or damaged file at once (HDF5's SWMR reader retries a
     failed read for ever). Only a file being written by a live writer is opened in SWMR mode;
     one still marked as being written by a writer that was killed, or that stopped on a full
-    disk, is read as if it had been closed (:class:`engine.io.superblock.FinishedWriteView`), up to
+    disk, is read as if it had been closed (:class:`granlab.engine.io.superblock.FinishedWriteView`), up to
     the end of what it wrote.
     """
     path = Path(path)

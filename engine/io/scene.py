@@ -74,7 +74,7 @@ class Scene:
 
 def builtin_scenes() -> list[str]:
     """Names of the scenes shipped with GranLab (``granlab run NAME``)."""
-    folder = resources.files("engine.io") / "scenes"
+    folder = resources.files(__package__) / "scenes"
     return sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith(".toml"))
 
 
@@ -82,7 +82,7 @@ def load_scene(path_or_name: str | Path) -> Scene:
     """Read a scene from a TOML file, or a built-in scene by name."""
     path = Path(path_or_name)
     if not path.suffix and str(path_or_name) in builtin_scenes():
-        text = (resources.files("engine.io") / "scenes" / f"{path_or_name}.toml").read_text()
+        text = (resources.files(__package__) / "scenes" / f"{path_or_name}.toml").read_text()
         return parse_scene(text, origin=f"built-in scene {path_or_name!r}")
     if path.is_dir():
         raise SceneError(f"{str(path)!r} is a folder: give a scene file (.toml) or a built-in scene "

@@ -1,6 +1,6 @@
 """Numba kernels: pure ``@njit(nogil=True, cache=True)`` functions over arrays.
 
-Kernels take arrays (bundled in the named tuples of :mod:`engine.state`) and
+Kernels take arrays (bundled in the named tuples of :mod:`granlab.engine.state`) and
 scalars only; every parameter a slider can change is a runtime argument.
 Parallel kernels are thin ``prange`` wrappers around serial chunk functions, used only
 when more than one numba thread is asked for: a parallel launch takes the GIL, so a

@@ -1,7 +1,7 @@
 """The one generic contact loop: geometry of each row of the contact table, then the laws.
 
 Forces and torques are accumulated per chunk of rows into private buffers (no write
-races between threads); :func:`engine.kernels.integrate.particle_pass` sums them. The
+races between threads); :func:`granlab.engine.kernels.integrate.particle_pass` sums them. The
 virial ``sum_c f_c ⊗ r_c`` is ``sum_i F_i ⊗ x_i`` over disks (summed by the particle
 pass) minus the terms this loop adds for the rare rows where that differs: contacts
 with walls and through periodic images.
@@ -12,7 +12,7 @@ along its normal), ``n = r/|r|``, ``t = z × n``:
 - ``V_n = (v_i - v_j) · n`` and ``(v_i - v_j) · t`` include the affine velocity of a
   deforming periodic cell and the velocity of a moving wall;
 - the tangential spring ``D_t``, its rate, its Coulomb limit and the factor of ``F_t`` on the
-  centres are those of the row's tangential model (:mod:`engine.kernels.tangential`): the
+  centres are those of the row's tangential model (:mod:`granlab.engine.kernels.tangential`): the
   loop sets the anchors (body-frame angles of the material points of first contact, ratcheting
   Eq. 21) and hands the model the row's geometry;
 - the moment of ``F_t`` is ``-r F_t`` on both disks; the rolling moment ``-K_r dtheta`` on i
@@ -130,7 +130,7 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
 
     One chunk runs here, in the calling thread; more run in parallel. (A parallel launch
     takes the GIL: a single-threaded run never does, so a busy Python thread cannot stall it.)
-    The loop is compiled once per tangential model (:data:`engine.kernels.tangential.CODES`), all
+    The loop is compiled once per tangential model (:data:`granlab.engine.kernels.tangential.CODES`), all
     of them with this kernel: the model is chosen here, once per step, not per row.
     """
     for code in literal_unroll(TANGENTIAL_CODES):

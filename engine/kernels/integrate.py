@@ -379,7 +379,7 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks,
 
 @njit(**JIT)
 def advance(p, w, cell, ct, spare, ws, law, run):
-    """Run up to ``run.n_steps`` velocity-Verlet steps (``run``: :class:`engine.state.RunOptions`);
+    """Run up to ``run.n_steps`` velocity-Verlet steps (``run``: :class:`granlab.engine.state.RunOptions`);
     returns ``(steps_done, code)``.
 
     Step ``k`` of this call ends at ``time_origin + (step_offset + k + 1) dt``. ``dt = 0`` with

@@ -56,10 +56,18 @@ def package_stamp() -> str:
 
 
 class _PackageStamped:
-    """A Numba cache locator for the kernels of this package, stamped by :func:`package_stamp`."""
+    """A Numba cache locator for the kernels of this package, stamped by :func:`package_stamp`.
+
+    Each stamp has a folder of its own: Numba unpickles an index before it compares stamps, so an
+    index written by other sources can name modules that no longer exist (the kernels' types were
+    ``engine.state``'s before the package was ``granlab.engine``) and stop every run with
+    ``ModuleNotFoundError`` instead of recompiling."""
 
     def get_source_stamp(self):
         return package_stamp()
+
+    def get_cache_path(self):
+        return str(Path(super().get_cache_path()) / f"stamp-{package_stamp()[:16]}")
 
     @classmethod
     def from_function(cls, py_func, py_file):

@@ -6,7 +6,7 @@ elastic repulsive part ``N^e >= 0`` alone bounds the tangential force and the
 rolling moment (Gilabert Eqs. 8, 10).
 
 The runtime parameters travel in one float64 vector indexed by ``KN, KT, ...``
-(see :func:`engine.simulation.law_vector`), so a slider never recompiles a kernel.
+(see :func:`granlab.engine.simulation.law_vector`), so a slider never recompiles a kernel.
 """
 
 import math

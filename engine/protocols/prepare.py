@@ -154,7 +154,7 @@ def gilabert_law(friction: float = 0.15, kappa: float = 1e5, cohesion: bool = Tr
     ``K_r = 1e-4 K_N a²`` and ``mu_r = 1e-2 mu a``.
 
     ``rolling_damping_ratio`` (not in the paper, which has none) adds a viscous rolling moment
-    (see :class:`engine.params.ContactLaw`; without rolling resistance it has nothing to act on)."""
+    (see :class:`granlab.engine.params.ContactLaw`; without rolling resistance it has nothing to act on)."""
     force_scale = 1.0 if cohesion else pressure * diameter
     kn = kappa * force_scale / diameter
     kr = 1e-4 * kn * diameter ** 2 if rolling else 0.0

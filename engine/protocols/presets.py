@@ -450,7 +450,7 @@ class RatchetPreset(Preset):
     cycle, t, step, box lengths), ``contacts`` (i, j, t, F_n, F_t, status of the watched pairs).
     The watched contacts are the ``watch_count`` that came closest to the Coulomb cone during
     the first cycle (the ones that slid, if any), until the user picks others. The strain per
-    cycle is fitted (:func:`engine.analysis.ratchet.ratchet_verdict`) from ``reference_cycle``
+    cycle is fitted (:func:`granlab.engine.analysis.ratchet.ratchet_verdict`) from ``reference_cycle``
     on: the first cycles settle the packing; after a change of the physics, from the second
     whole cycle after it (``fit_from``), or from the next cycle start on request (:meth:`fit_from_now`).
     """

@@ -1,4 +1,4 @@
-"""Tangential spring models: one module each, named in the registry :data:`engine.params.TANGENTIAL`.
+"""Tangential spring models: one module each, named in the registry :data:`granlab.engine.params.TANGENTIAL`.
 
 A model module holds four small kernels, which the one contact loop calls for each touching row:
 

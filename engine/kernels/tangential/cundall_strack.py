@@ -23,7 +23,7 @@ def trial_spring(previous, rate, dt, fresh, row):
 
 @njit(**KERNEL)
 def limit(kt, mu, gamma_t, ne, fn, trial, rate):
-    """Coulomb on the elastic normal force ``N^e`` (Gilabert Eq. 8): :func:`engine.kernels.laws.coulomb`."""
+    """Coulomb on the elastic normal force ``N^e`` (Gilabert Eq. 8): :func:`granlab.engine.kernels.laws.coulomb`."""
     return coulomb(kt, mu, gamma_t, ne, trial, rate)
 
 

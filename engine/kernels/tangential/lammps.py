@@ -51,7 +51,7 @@ def trial_spring(previous, rate, dt, fresh, row):
 def limit(kt, mu, gamma_t, ne, fn, trial, rate):
     """Coulomb on ``mu |F_n|`` with the viscous part inside the limit, as LAMMPS rescales it.
 
-    Returns ``(D_t, F_t, status, slip)`` as :func:`engine.kernels.laws.coulomb` does.
+    Returns ``(D_t, F_t, status, slip)`` as :func:`granlab.engine.kernels.laws.coulomb` does.
     """
     ft = -kt * trial - gamma_t * rate
     bound = mu * abs(fn)
