@@ -21,7 +21,7 @@ from granlab.engine.analysis.states import PackingState
 from granlab.engine.studies import RatchetCurve
 
 from .analysis import AnalysisResult
-from .plots import MODEL_COLORS, AnalysisFigures, compact, lab_figure, legend_beside
+from .plots import MODEL_STYLES, AnalysisFigures, compact, lab_figure, legend_beside
 
 _shown_inline = False
 
@@ -47,7 +47,7 @@ def strain_figure(curves: list[RatchetCurve]):
 
     figures = []
     for curve in curves:
-        color = MODEL_COLORS[curve.model]
+        color = MODEL_STYLES[curve.model][0]
         cycles = curve.cycles[curve.reference_cycle:]
         verdict = curve.verdict
         verdict_text = f"Δγ = {compact(verdict.dgamma)} per cycle" if verdict.ratcheting else "no ratcheting"

@@ -22,8 +22,8 @@ from bokeh.models import (ColorBar, ColumnDataSource, CustomJSTickFormatter, Lab
 from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
-from engine.params import TANGENTIAL
-from engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
+from granlab.engine.params import TANGENTIAL
+from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 from . import analysis
 from .drawing import STATUS_LEGEND, WATCHED_COLORS, hex_color
@@ -465,11 +465,23 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
     return plot
 
 
-MODEL_COLORS = dict(zip(TANGENTIAL, ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2")))
-"""One colour per tangential model, in the registry's order, in every plot that compares them."""
-MODEL_DASHES = dict(zip(TANGENTIAL, ("solid", "solid", "dashed", "dashed", "dotted", "dotdash")))
-"""The line of each model: the angle spring's lies on the α-corrected one and LAMMPS's on
-Cundall–Strack's, so the later of each pair is dashed and the earlier shows through."""
+MODEL_PALETTE = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#ff7f0e", "#17becf", "#bcbd22",
+                 "#7f7f7f")
+MODEL_LINES = ("solid", "solid", "dashed", "dashed", "dotted", "dotdash", "dashdot", "solid", "solid", "solid")
+"""The line of each of the first ten models: the angle spring's lies on the α-corrected one and
+LAMMPS's on Cundall–Strack's, so the later of each pair is dashed and the earlier shows through."""
+
+
+def model_styles(names) -> dict[str, tuple[str, str]]:
+    """(colour, line) of each model in ``names``, in order, all different however many there are:
+    past the ten colours, each comes round again with a dash of its round ("4 3", "6 3", ...)."""
+    return {name: (MODEL_PALETTE[i % len(MODEL_PALETTE)],
+                   MODEL_LINES[i] if i < len(MODEL_LINES) else f"{2 * (i // len(MODEL_PALETTE)) + 2} 3")
+            for i, name in enumerate(names)}
+
+
+MODEL_STYLES = model_styles(TANGENTIAL)
+"""The style of each registered tangential model, in every plot that compares them."""
 
 LINES = {
     "energy": {"title": "Energy budget", "series": "time", "y": "energy (paper units)",
@@ -480,11 +492,11 @@ LINES = {
                      "lines": [("t", "z", "z", "#1f77b4")]},
     "springs": {"title": "Spring D_t of each tangential model (ratcheting Fig. 9)", "series": "springs",
                 "y": "D_t (length, paper units)",
-                "lines": [("t", f"dt_{m.key}", m.label, MODEL_COLORS[m.name], MODEL_DASHES[m.name])
+                "lines": [("t", f"dt_{m.key}", m.label, *MODEL_STYLES[m.name])
                           for m in TANGENTIAL.values()]},
     "spring-path": {"title": "(D_t, D_n) along the closed path A→B→C→D→A", "series": "springs",
                     "x": "D_t (length, paper units)", "y": "D_n (gap, < 0: overlap)",
-                    "lines": [(f"dt_{m.key}", f"dn_{m.key}", m.label, MODEL_COLORS[m.name], MODEL_DASHES[m.name])
+                    "lines": [(f"dt_{m.key}", f"dn_{m.key}", m.label, *MODEL_STYLES[m.name])
                               for m in TANGENTIAL.values()]},
     "block-load": {"title": "Sideways load and the block's velocity", "series": "block",
                    "y": "load / μF_n;  velocity (paper units)",
@@ -510,7 +522,7 @@ label unless given) and lines (x column, y column, legend label, colour)."""
 
 
 class AnalysisFigures:
-    """The figures of an analysis (:data:`engine.analysis.report.FIGURES` that a plot draws):
+    """The figures of an analysis (:data:`granlab.engine.analysis.report.FIGURES` that a plot draws):
     ``network`` the contacts by the status minimum sliding gives, ``forces`` the (N, T) scatter,
     ``structure`` I(k) and its fit; each fed by its own sources (the lab's Analysis tab and a
     notebook draw the same)."""
@@ -548,8 +560,8 @@ class AnalysisFigures:
         self.figures = {"network": network, "forces": forces, "structure": structure}
 
     def show(self, result) -> tuple[str, ...]:
-        """Feed the figures from ``result`` (an :class:`app.analysis.AnalysisResult`); the names of
-        the figures its report has (:data:`engine.analysis.report.FIGURES`)."""
+        """Feed the figures from ``result`` (an :class:`granlab.app.analysis.AnalysisResult`); the names of
+        the figures its report has (:data:`granlab.engine.analysis.report.FIGURES`)."""
         figures = tuple(result.report.figures) if result.report is not None else ()
         src = self.sources
         if "network" in figures:

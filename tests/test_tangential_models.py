@@ -69,3 +69,15 @@ def test_every_model_takes_energy_out_of_random_oblique_impacts_never_puts_it_in
         assert budget.dissipated > 0.0
         # second order with GranLab's whole-step dashpots (worst 2e-4 here), first with LAMMPS's (5e-3)
         assert abs(budget.balance - before) < (1e-3 if TANGENTIAL[model].whole_step_dashpots else 1e-2) * before
+
+
+def test_any_number_of_models_gets_a_colour_and_a_line_of_its_own():
+    """A fifth, seventh or seventieth registered model is drawn in a style no other model has (the
+    colours were zipped with six, and a seventh model stopped ``import granlab.app.plots``)."""
+    from granlab.app.plots import LINES, MODEL_STYLES, model_styles
+
+    styles = model_styles([f"model-{i}" for i in range(70)])
+    assert len(set(styles.values())) == 70
+    assert MODEL_STYLES == model_styles(TANGENTIAL)
+    assert [line[2:] for line in LINES["springs"]["lines"]] == [(m.label, *MODEL_STYLES[m.name])
+                                                                for m in TANGENTIAL.values()]
