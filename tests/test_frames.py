@@ -85,5 +85,5 @@ def test_frame_from_a_live_simulation_matches_its_snapshot():
     partner = np.where(c.j < n, snap.radii[np.minimum(c.j, n - 1)], 0.0)
     length = np.linalg.norm(b.contacts[:, 1] - b.contacts[:, 0], axis=1)
     np.testing.assert_allclose(length, snap.radii[c.i] + partner + c.surface_gap, rtol=1e-9)
-    from granlab.app.frames import contact_fields
+    from granlab.engine.kernels.fields import contact_fields
     assert len(contact_fields.signatures) == 1  # hand-built, snapshot and live arrays: one compilation

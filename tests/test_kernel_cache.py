@@ -1,8 +1,11 @@
 """The on-disk kernel cache is invalidated by a change to any kernel source, not only the kernel's own."""
 
+import re
 from pathlib import Path
 
 from granlab.engine.kernels import integrate, jit
+
+KERNEL_DECORATOR = r"(?m)^\s*@(numba\.)?(njit|jit|vectorize|guvectorize|stencil|cfunc)\b"
 
 
 def test_a_kernel_is_cached_under_the_stamp_of_every_kernel_source():
@@ -29,8 +32,16 @@ def test_the_stamp_changes_with_the_content_of_any_source(tmp_path):
     assert jit.sources_stamp([laws, contacts]) == before
 
 
-def test_functions_outside_the_kernels_keep_numba_s_own_locator():
-    from granlab.engine.analysis import fractal
+def test_every_numba_kernel_lives_in_the_kernels_package_under_its_stamp():
+    """A kernel elsewhere (the scene's contact fields were in the lab's package, the fractal grid in
+    the analysis) was cached by Numba's own rule and could run stale after a change to a kernel
+    it calls or a constant it compiles in."""
+    from granlab.engine.kernels import fields, grid
 
-    dispatcher = next(value for value in vars(fractal).values() if hasattr(value, "_cache") and value._cache)
-    assert not type(dispatcher._cache._impl.locator).__name__.startswith("Kernels")
+    root = Path(jit.__file__).resolve().parents[2]
+    sources = [path for folder in ("app", "engine", "granlab") for path in (root / folder).rglob("*.py")]
+    elsewhere = [path.relative_to(root) for path in sources
+                 if jit.KERNELS not in path.resolve().parents and re.search(KERNEL_DECORATOR, path.read_text())]
+    assert elsewhere == []
+    for dispatcher in (fields.contact_fields, grid.paint_disks, grid.shell_sums, grid.label_moments):
+        assert type(dispatcher._cache._impl.locator).__name__.startswith("Kernels")

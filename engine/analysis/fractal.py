@@ -34,10 +34,9 @@ import scipy.fft
 import scipy.ndimage
 import scipy.optimize
 import scipy.special
-from numba import njit
 
 from ..errors import GranLabError, ParameterError
-from ..kernels.jit import JIT
+from ..kernels.grid import label_moments, paint_disks, shell_sums
 
 MAX_CELLS = 80_000_000
 """Largest grid allowed: 8e7 cells, about 1 GB at the peak (the field in float32 and its transform,
@@ -137,37 +136,6 @@ class FractalAnalysis:
 
 # ---------------------------------------------------------------------------------------- grid
 
-@njit(**JIT)
-def _paint_disks(positions, radii, dx, dy, field):
-    """Set ``field[i, j] = 1`` at every cell centre ``((i + 1/2) dx, (j + 1/2) dy)`` inside a disk,
-    the grid being periodic. Positions must lie in the box."""
-    nx, ny = field.shape
-    for p in range(radii.shape[0]):
-        cx, cy, r = positions[p, 0], positions[p, 1], radii[p]
-        i0 = int(math.ceil((cx - r) / dx - 0.5))
-        i1 = int(math.floor((cx + r) / dx - 0.5))
-        for i in range(i0, i1 + 1):
-            u = (i + 0.5) * dx - cx
-            h2 = r * r - u * u
-            if h2 < 0.0:
-                continue
-            h = math.sqrt(h2)
-            j0 = int(math.ceil((cy - h) / dy - 0.5))
-            j1 = int(math.floor((cy + h) / dy - 0.5))
-            count = j1 - j0 + 1
-            if count <= 0:
-                continue
-            row = i % nx
-            if count >= ny:
-                field[row, :] = 1
-                continue
-            start = j0 % ny
-            stop = start + count
-            field[row, start:min(stop, ny)] = 1
-            if stop > ny:
-                field[row, :stop - ny] = 1
-
-
 def grid_shape(box_lengths, spacing) -> tuple[int, int]:
     """Cells ``(nx, ny)``: the smallest sizes fast for the FFT whose cells are no wider than
     ``spacing`` (a length or ``(dx, dy)``); at most ``MAX_CELLS`` in all."""
@@ -204,32 +172,11 @@ def density_field(positions, radii, box_lengths, spacing) -> np.ndarray:
     lengths = _box(box_lengths)
     nx, ny = grid_shape(lengths, spacing)
     field = np.zeros((nx, ny), dtype=np.uint8)
-    _paint_disks(np.mod(positions, lengths), radii, lengths[0] / nx, lengths[1] / ny, field)
+    paint_disks(np.mod(positions, lengths), radii, lengths[0] / nx, lengths[1] / ny, field)
     return field
 
 
 # -------------------------------------------------------------------------- scattering function
-
-@njit(**JIT)
-def _shell_sums(spectrum, ny, kx_unit, ky_unit, dk, count, k_sum, power_sum):
-    """Accumulate, per shell ``s = round(|k| / dk)``, the number of wavevectors, the sum of ``|k|``
-    and of ``|F|²`` over a real-to-complex spectrum ``(nx, ny // 2 + 1)``; every column but the
-    first and (``ny`` even) the last stands for two wavevectors ``±k``. ``k = 0`` is skipped."""
-    nx, columns = spectrum.shape
-    for i in range(nx):
-        kx = (i if i <= nx // 2 else i - nx) * kx_unit
-        for j in range(columns):
-            if i == 0 and j == 0:
-                continue
-            ky = j * ky_unit
-            k = math.sqrt(kx * kx + ky * ky)
-            weight = 1.0 if j == 0 or 2 * j == ny else 2.0
-            s = int(k / dk + 0.5)
-            value = spectrum[i, j]
-            count[s] += weight
-            k_sum[s] += weight * k
-            power_sum[s] += weight * (value.real * value.real + value.imag * value.imag)
-
 
 def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE) -> tuple[np.ndarray, np.ndarray]:
     """Binned ``|k|`` and ``I(k) = |chi_hat(k)|² / A`` (Eq. 25) of a periodic ``field`` (``(nx, ny)``
@@ -248,7 +195,7 @@ def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE)
     dk = 2.0 * math.pi / max(lengths)
     shells = int(math.hypot(math.pi / dx, math.pi / dy) / dk) + 2
     count, k_sum, power_sum = np.zeros(shells), np.zeros(shells), np.zeros(shells)
-    _shell_sums(spectrum, ny, 2.0 * math.pi / lengths[0], 2.0 * math.pi / lengths[1], dk, count, k_sum, power_sum)
+    shell_sums(spectrum, ny, 2.0 * math.pi / lengths[0], 2.0 * math.pi / lengths[1], dk, count, k_sum, power_sum)
     shell = np.arange(shells)
     ratio = 10.0 ** (1.0 / bins_per_decade)
     linear_until = 1.0 / (ratio - 1.0)  # shells wider than the logarithmic bins
@@ -410,21 +357,6 @@ def fit_structure(k, intensity, phi: float, diameter: float | None = None, k_ran
 
 # ------------------------------------------------------------------------------------------ holes
 
-@njit(**JIT)
-def _label_moments(labels, count, sum_i, sum_j, sum_ii, sum_jj):
-    """Per label (> 0): number of cells and the sums of the cell indices i, j and of their squares."""
-    nx, ny = labels.shape
-    for i in range(nx):
-        for j in range(ny):
-            label = labels[i, j]
-            if label > 0:
-                count[label] += 1.0
-                sum_i[label] += i
-                sum_j[label] += j
-                sum_ii[label] += i * i
-                sum_jj[label] += j * j
-
-
 def _periodic_images(labels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Join the labels that touch across the periodic edges (union-find that keeps the periodic
     image of each label relative to its root, as :func:`granlab.engine.analysis.packing.percolation_force`
@@ -478,7 +410,7 @@ def hole_radii(field, spacing) -> tuple[np.ndarray, np.ndarray]:
     if found == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     count, sum_i, sum_j, sum_ii, sum_jj = (np.zeros(found + 1) for _ in range(5))
-    _label_moments(labels, count, sum_i, sum_j, sum_ii, sum_jj)
+    label_moments(labels, count, sum_i, sum_j, sum_ii, sum_jj)
     roots, images, wraps = _periodic_images(labels)
     del labels
     ox, oy = images[:, 0] * nx, images[:, 1] * ny
