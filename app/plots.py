@@ -22,6 +22,7 @@ from bokeh.models import (ColorBar, ColumnDataSource, CustomJSTickFormatter, Lab
 from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
+from granlab.engine.observables import sliding
 from granlab.engine.params import TANGENTIAL
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
@@ -417,7 +418,7 @@ class ConePlot(LivePlot):
         _stream(self.paths, rows, reset, PATH_ROLLOVER)
         if len(normal):
             self.top = max(self.top, float(np.abs(normal).max()))
-        slides = np.flatnonzero(np.isin(state, (STATUS_SLIDE_POS, STATUS_SLIDE_NEG)))
+        slides = np.flatnonzero(sliding(state))
         positive = state[slides] == STATUS_SLIDE_POS
         marks = {"x": normal[slides], "y": tangential[slides],
                  "color": np.where(positive, STATUS_LEGEND[STATUS_SLIDE_POS][1], STATUS_LEGEND[STATUS_SLIDE_NEG][1]),

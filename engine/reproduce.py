@@ -43,8 +43,8 @@ from .analysis.fractal import FitError, average_series_intensity, fit_structure
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
+from .observables import coordination as observed_coordination
 from .params import nonnegative
-from .state import STATUS_NONE
 from .studies import STUDY_LIMITS
 
 PHI_I = 0.36
@@ -214,8 +214,7 @@ def coordination(snapshot, cohesive: bool, force_scale: float) -> float:
     if not cohesive:
         return packing_stats(snapshot, force_scale).z
     c = snapshot.contacts
-    n = snapshot.positions.shape[0]
-    return 2.0 * int(np.count_nonzero((c.status != STATUS_NONE) & (c.j < n))) / n
+    return observed_coordination(c.status, c.i, c.j, snapshot.positions.shape[0], distant=True)
 
 
 def _fractal(snapshot, prefix: str) -> dict:

@@ -26,6 +26,7 @@ from .analysis.ratchet import RatchetVerdict, deviatoric_strain, ratchet_verdict
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
+from .observables import columns, touching
 from .params import TANGENTIAL_MODELS, finite, nonnegative, positive
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import biaxial_law, compress
@@ -201,9 +202,9 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
 
 def touching_pairs(sim) -> list[tuple[int, int]]:
     """The (i, j) of every touching contact (j >= N: a wall)."""
-    snapshot = sim.contact_snapshot()
-    touching = snapshot.surface_gap < 0
-    return [(int(i), int(j)) for i, j in zip(snapshot.i[touching], snapshot.j[touching])]
+    status, i, j, _ = columns(sim)
+    rows = touching(status)
+    return [(int(a), int(b)) for a, b in zip(i[rows], j[rows])]
 
 
 def _failure(study, seed, model, error) -> dict:

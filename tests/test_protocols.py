@@ -8,8 +8,9 @@ import pytest
 from granlab.engine import ContactLaw, ParameterError, ParticleState, PeriodicCell, Simulation, box_walls
 from granlab.engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
 from granlab.engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
+from granlab.engine.observables import clusters, columns
 from granlab.engine.protocols.equilibrium import equilibrium, measured_pressure
-from granlab.engine.protocols.prepare import gilabert_gas, cell_mass, clusters, compress, gilabert_law, method1, method2
+from granlab.engine.protocols.prepare import gilabert_gas, cell_mass, compress, gilabert_law, method1, method2
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +71,7 @@ def test_method2_aggregates_into_one_cluster_in_equilibrium():
     law = gilabert_law(cohesion=True, pressure=0.01, kappa=1e4)
     prepared = method2(20, pressure=0.01, law=law, accelerated=True, max_time=2000)
     assert prepared.equilibrated
-    assert clusters(prepared.sim) == 1
+    assert clusters(*columns(prepared.sim)) == 1
     assert prepared.sim.law.normal_stiffness == law.normal_stiffness
     with pytest.raises(ParameterError, match="cohesive law"):
         method2(10, law=gilabert_law(cohesion=False))

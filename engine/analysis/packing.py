@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..state import STATUS_NONE
+from ..observables import backbone, disk_contacts, interacting, solid_fraction
 
 RATTLER_FORCE_TOLERANCE = 1e-4
 """Interactions carrying less than this fraction of F1 = max(F0, P a) count as carrying no force
@@ -73,13 +73,6 @@ class PackingStats:
         return {k: v for k, v in self.__dict__.items() if k not in ("normal", "tangential", "reasons")}
 
 
-def solid_fraction(state, area: float | None = None) -> float:
-    """Area of the disks over the area of the domain (``area``, or the state's box)."""
-    if area is None:
-        area = float(np.prod(state.box_lengths))
-    return float(np.pi * np.sum(state.radii ** 2) / area)
-
-
 def pressure(state) -> float:
     """(sigma_xx + sigma_yy) / 2 of the state's disk-disk stress (compression positive)."""
     return 0.5 * float(state.stress[0, 0] + state.stress[1, 1])
@@ -99,19 +92,14 @@ def packing_stats(state, force_scale_value: float | None = None, area: float | N
     forces_known = getattr(state, "forces_known", True)
     scale = force_scale(state) if force_scale_value is None else force_scale_value
     force = np.hypot(c.normal_force, c.tangential_force)
-    carrying = (c.status != STATUS_NONE) & ((force > RATTLER_FORCE_TOLERANCE * scale) | (not forces_known))
-    pair = carrying & (c.j < n)
-    per_disk = np.bincount(c.i[pair], minlength=n) + np.bincount(c.j[pair], minlength=n)
-    with_walls = per_disk + np.bincount(c.i[carrying & (c.j >= n)], minlength=n)
-    rattlers = int(np.count_nonzero(with_walls == 0))
-    contacts = int(np.count_nonzero(pair))
-    z = 2.0 * contacts / n
-    backbone = n - rattlers
-    phi = solid_fraction(state, area)
-    stats = dict(phi=phi, z=z, z_star=2.0 * contacts / backbone if backbone else 0.0, rattlers=rattlers,
-                 contacts=contacts, particles=n, coordination=(np.bincount(per_disk) / n).tolist(),
+    carrying = interacting(c.status) & ((force > RATTLER_FORCE_TOLERANCE * scale) | (not forces_known))
+    per_disk, _ = disk_contacts(carrying, c.i, c.j, n)
+    z, z_star, rattlers = backbone(carrying, c.i, c.j, n)
+    phi = solid_fraction(state.radii, state.box_lengths, area)
+    stats = dict(phi=phi, z=z, z_star=z_star, rattlers=rattlers,
+                 contacts=int(per_disk.sum()) // 2, particles=n, coordination=(np.bincount(per_disk) / n).tolist(),
                  forces_known=forces_known)
-    reasons = {} if backbone else {"z_star": NO_BACKBONE}
+    reasons = {} if rattlers < n else {"z_star": NO_BACKBONE}
     if forces_known:
         forces, force_reasons = _force_statistics(state, phi, scale)
         stats.update(forces)
@@ -130,8 +118,8 @@ def _force_statistics(state, phi: float, scale: float) -> tuple[dict, dict]:
     """The values of ``FORCE_VALUES`` and ``normal``, ``tangential``; and the reasons of those that are None."""
     n = state.positions.shape[0]
     c = state.contacts
-    interacting = (c.status != STATUS_NONE) & (c.j < n)
-    normal, tangential = c.normal_force[interacting], c.tangential_force[interacting]
+    pairs = interacting(c.status) & (c.j < n)
+    normal, tangential = c.normal_force[pairs], c.tangential_force[pairs]
     count = len(normal)
     mean = float(normal.mean()) if count else 0.0
     cohesive = float(state.law.cohesion_force) > 0.0
@@ -143,7 +131,7 @@ def _force_statistics(state, phi: float, scale: float) -> tuple[dict, dict]:
     z = 2.0 * count / n
     diameters = 2.0 * np.asarray(state.radii)
     denominator = z * phi
-    percolation = percolation_force(state, np.hypot(c.normal_force, c.tangential_force), c.status != STATUS_NONE)
+    percolation = percolation_force(state, np.hypot(c.normal_force, c.tangential_force), interacting(c.status))
     reasons = {} if denominator > 0 else dict.fromkeys(("rumpf_force", "rumpf_force_eq18"), NO_INTERACTIONS)
     if percolation is None:
         reasons["percolation_force"] = NO_PERCOLATION

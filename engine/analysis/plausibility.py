@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..state import STATUS_NONE
-from .packing import solid_fraction
+from ..observables import interacting, solid_fraction
 from .states import contact_force_vectors
 
 UNBALANCED_FORCE = 0.1
@@ -21,12 +20,12 @@ def implausible(state) -> list[str]:
     """What makes ``state`` (:class:`granlab.engine.analysis.states.PackingState`) unphysical, one line each."""
     findings = []
     n = state.disks
-    phi = solid_fraction(state)
+    phi = solid_fraction(state.radii, state.box_lengths)
     if phi > 1.0:
         findings.append(f"the solid fraction is {phi:.4g}, above 1: the disks are larger than their box; is another "
                         f"column read as the radius, or are the sizes diameters under a radius's name?")
     c = state.contacts
-    pair = (c.j < n) & (c.status != STATUS_NONE)
+    pair = (c.j < n) & interacting(c.status)
     depth = -c.surface_gap[pair] / np.minimum(state.radii[c.i[pair]], state.radii[c.j[pair]])
     deep = int(np.count_nonzero(depth > 1.0))
     if deep:

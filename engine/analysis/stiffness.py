@@ -47,7 +47,8 @@ import scipy.sparse.linalg as spla
 
 from .. import params
 from ..errors import ParameterError
-from ..state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from ..observables import interacting, sliding
+from ..state import STATUS_COHESIVE
 
 NORMAL, TANGENTIAL, ROLLING = 0, 1, 2
 ZERO_TOLERANCE = 1e-9
@@ -109,7 +110,7 @@ class Network:
     @property
     def sliding(self) -> np.ndarray:
         """The contacts the dynamics left sliding (on the Coulomb cone)."""
-        return (self.status == STATUS_SLIDE_POS) | (self.status == STATUS_SLIDE_NEG)
+        return sliding(self.status)
 
     @property
     def sign_dt(self) -> np.ndarray:
@@ -137,7 +138,7 @@ def network(snapshot, cell_lengths=None) -> Network:
     c = snapshot.contacts
     law = snapshot.law
     n = len(snapshot.radii)
-    keep = np.isin(c.status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG, STATUS_COHESIVE))
+    keep = interacting(c.status)
     i, j, image = c.i[keep], c.j[keep], c.image[keep]
     is_wall = j >= n
     wall = np.where(is_wall, j - n, -1)

@@ -1,17 +1,13 @@
-"""What presets and the lab measure of a running simulation: the rows of watched contacts, the
-pairs of the contact table as codes, the mobilisation of friction, the coordination, the
-sliding contacts and the solid fraction."""
+"""What presets and the lab follow of a running simulation: the rows of watched contacts, the
+pairs of the contact table as codes and the mobilisation of friction (the packing's own
+observables, z, Φ, sliding contacts, are :mod:`granlab.engine.observables`)."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from ..observables import touching
 from ..simulation import Simulation
-from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-
-TOUCHING = (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG)
 
 
 def pair_label(pair: tuple[int, int], disks: int, wall_names) -> str:
@@ -32,8 +28,7 @@ def contact_rows(sim: Simulation, pairs: list[tuple[int, int]]):
     keys = np.array(pairs, dtype=np.int64)
     out = []
     for k in np.flatnonzero(np.isin(pair_codes(snap.i, snap.j), pair_codes(keys[:, 0], keys[:, 1]))):
-        touching = snap.status[k] in TOUCHING
-        normal = snap.elastic_normal_force[k] - cohesion if touching else snap.normal_force[k]
+        normal = snap.elastic_normal_force[k] - cohesion if touching(snap.status[k]) else snap.normal_force[k]
         out.append((int(snap.i[k]), int(snap.j[k]), float(normal), float(snap.tangential_force[k]),
                     int(snap.status[k])))
     return out
@@ -48,8 +43,7 @@ def mobilisation(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (K, 2) and |F_t| / N^e (K,) of the touching contacts with N^e > 0 (the ratio
     reaches mu on the Coulomb cone)."""
     snap = sim.contact_snapshot()
-    touching = np.isin(snap.status, TOUCHING)
-    keep = np.flatnonzero(touching & (snap.elastic_normal_force > 0))
+    keep = np.flatnonzero(touching(snap.status) & (snap.elastic_normal_force > 0))
     ratio = np.abs(snap.tangential_force[keep]) / snap.elastic_normal_force[keep]
     return np.column_stack([snap.i[keep], snap.j[keep]]), ratio
 
@@ -77,24 +71,3 @@ class PairMaximum:
         """The ``count`` pairs of largest value, largest first."""
         top = np.argsort(-self.values, kind="stable")[:count]
         return [(int(c >> 32), int(c & 0xFFFFFFFF)) for c in self.codes[top]]
-
-
-def coordination(sim: Simulation) -> float:
-    """Mean number of touching disk-disk contacts per disk, 2 M / N."""
-    table = sim.contacts
-    rows = table.count
-    n = sim.particles.count
-    touching = np.isin(table.status[:rows], TOUCHING)
-    return 2.0 * int(np.count_nonzero(touching & (table.particle_j[:rows] < n))) / n
-
-
-def sliding_contacts(sim: Simulation) -> int:
-    """Contacts sliding now (on either side of the Coulomb cone)."""
-    status = sim.contact_status()
-    return int(np.count_nonzero((status == STATUS_SLIDE_POS) | (status == STATUS_SLIDE_NEG)))
-
-
-def solid_fraction(sim: Simulation) -> float:
-    """Disk area over the area of the box or cell (:meth:`Simulation.box_lengths`)."""
-    lengths = sim.box_lengths()
-    return math.pi * float(np.sum(sim.particles.radius ** 2)) / float(lengths[0] * lengths[1])

@@ -14,15 +14,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..errors import ParameterError
 from ..generate import radii, random_gas, square_lattice
+from ..observables import clusters, columns
 from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, nonnegative, positive
 from ..simulation import Simulation
-from ..state import (CELL_MASS_FRACTION, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, ParticleState,
-                     default_cell_mass)
+from ..state import CELL_MASS_FRACTION, ParticleState, default_cell_mass
 from .equilibrium import EquilibriumReport, Progress, advance, equilibrium, measured_pressure, relax
 
 
@@ -233,21 +231,6 @@ def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "1", pressure)
 
 
-def clusters(sim: Simulation) -> int:
-    """Number of clusters: disks joined by touching contacts or distant cohesive interactions."""
-    n = sim.particles.count
-    table = sim.contacts
-    rows = table.count
-    linked = (table.status[:rows] != STATUS_NONE) & (table.particle_j[:rows] < n)
-    i = table.particle_i[:rows][linked]
-    j = table.particle_j[:rows][linked]
-    graph = coo_matrix((np.ones(i.size), (i, j)), shape=(n, n))
-    return int(connected_components(graph, directed=False)[0])
-
-
-def touching_contacts(sim: Simulation) -> int:
-    status = sim.contacts.status[:sim.contacts.count]
-    return int(np.count_nonzero(np.isin(status, (STATUS_STICK, STATUS_SLIDE_POS, STATUS_SLIDE_NEG))))
 
 
 def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
@@ -298,7 +281,7 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     reporter = None if progress is None else Progress(progress, 0.0, "aggregating")
     while sim.time < max_time:
         advance(sim, int(round(check / sim.dt)), reporter)
-        if clusters(sim) == 1:
+        if clusters(*columns(sim)) == 1:
             report = equilibrium(sim, measured_pressure(sim))
             if report.force < 1.0 and report.moment < 1.0:
                 break

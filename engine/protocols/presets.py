@@ -27,14 +27,14 @@ import numpy as np
 
 from ..analysis.ratchet import ratchet_verdict
 from ..errors import ParameterError
+from ..observables import clusters, columns, coordination, sliding, solid_fraction
 from ..params import TANGENTIAL, TANGENTIAL_MODELS, ContactLaw, Integration, PeriodicCell, Wall
 from ..simulation import Simulation, Snapshot, side_by_side
 from ..state import ParticleState
 from .cyclic import CyclicLoad, apply_load
 from .equilibrium import equilibrium, measured_pressure
-from .measures import (PairMaximum, contact_rows, coordination, mobilisation, pair_label, sliding_contacts,
-                       solid_fraction)
-from .prepare import COMPRESSION_RAMP, biaxial_box, clusters, gilabert_gas, gilabert_law, hold_load, ramp_load
+from .measures import PairMaximum, contact_rows, mobilisation, pair_label
+from .prepare import COMPRESSION_RAMP, biaxial_box, gilabert_gas, gilabert_law, hold_load, ramp_load
 from .settings import LAW_CONTROLS, LabSettings
 
 MAX_CYCLE_STEPS = 1e7
@@ -423,7 +423,9 @@ class Preset(ABC):
         """Figures for the lab's readout strip (those that mean something for the preset): solid
         fraction, coordination, sliding contacts."""
         sim = self.views()[0].sim
-        return {"phi": solid_fraction(sim), "z": coordination(sim), "sliding": sliding_contacts(sim)}
+        table = columns(sim)
+        return {"phi": solid_fraction(sim.particles.radius, sim.box_lengths()), "z": coordination(*table),
+                "sliding": int(sliding(table[0]).sum())}
 
 
 def _value_text(value) -> str:
@@ -646,7 +648,7 @@ class RatchetPreset(Preset):
         cycling = self.stage == "cycling"
         q = self.load.q(sim.time - self._start) if cycling else 0.0
         self._emit("time", (sim.time, self._cycle if cycling else -1, q, self._gamma(), energy.kinetic,
-                            energy.stored, energy.dissipated, energy.balance, coordination(sim)))
+                            energy.stored, energy.dissipated, energy.balance, coordination(*columns(sim))))
 
     def sample_paths(self) -> None:
         time = self._sim.time
@@ -845,7 +847,7 @@ class BlockPreset(Preset):
         return done
 
     def readout(self) -> dict:
-        return {"sliding": sliding_contacts(self._sim), "load": self._load_ratio()}
+        return {"sliding": int(sliding(self._sim.contact_status()).sum()), "load": self._load_ratio()}
 
     def _load_ratio(self) -> float:
         phase = (self._sim.time % self.settings.period) / self.settings.period
@@ -941,7 +943,7 @@ class AggregationPreset(GilabertPreset):
         late = sim.time - self._stage_start > self.stage_limits.get(self.stage, math.inf)
         if self.stage == "aggregating":
             report = equilibrium(sim, measured_pressure(sim))
-            if (clusters(sim) == 1 and report.force < 1.0 and report.moment < 1.0) or late:
+            if (clusters(*columns(sim)) == 1 and report.force < 1.0 and report.moment < 1.0) or late:
                 self._next_stage("relaxing", late, 0.0)
         elif self.stage == "relaxing":
             report = equilibrium(sim, 0.0)
@@ -971,7 +973,9 @@ class AggregationPreset(GilabertPreset):
 
     def sample(self) -> None:
         sim = self._sim
-        self._emit("time", (sim.time, coordination(sim), solid_fraction(sim), clusters(sim), sim.energy().kinetic))
+        table = columns(sim)
+        self._emit("time", (sim.time, coordination(*table), solid_fraction(sim.particles.radius, sim.box_lengths()),
+                            clusters(*table), sim.energy().kinetic))
 
 
 class CompressionPreset(GilabertPreset):
@@ -1013,7 +1017,8 @@ class CompressionPreset(GilabertPreset):
 
     def sample(self) -> None:
         sim = self._sim
-        self._emit("time", (sim.time, coordination(sim), solid_fraction(sim), measured_pressure(sim),
+        self._emit("time", (sim.time, coordination(*columns(sim)),
+                            solid_fraction(sim.particles.radius, sim.box_lengths()), measured_pressure(sim),
                             sim.energy().kinetic))
 
 
