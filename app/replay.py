@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.analysis.states import PackingState, StateReader, detect_format, read_state
 from granlab.engine.errors import GranLabError
 from granlab.engine.io import h5md
 from granlab.engine.io.outputs import staged
-from granlab.engine.protocols.presets import PRESETS, strain_fit
+from granlab.engine.protocols.presets import PRESETS
 
 from .frames import FrameData, build_frame
 

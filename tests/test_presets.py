@@ -283,3 +283,18 @@ def test_watching_a_pair_checks_that_it_can_exist():
     assert preset.toggle_watch((j, i)) == f"contact {i}–{j}: watched"  # either order names the pair
     assert (i, j) in preset.watch
     assert "not touching now" in preset.toggle_watch((0, 15 if (0, 15) != (i, j) else 14))
+
+
+def test_every_preset_is_a_module_of_the_package_with_its_teaching_text():
+    """Adding a preset is one module of ``engine/protocols/presets/``, its text in
+    ``static/teaching/`` and one entry of the registry."""
+    from pathlib import Path
+
+    from granlab.app.dashboard import STATIC, teaching_text
+    from granlab.engine.protocols import presets
+
+    folder = Path(presets.__file__).parent
+    for name, cls in PRESETS.items():
+        module = Path(__import__(cls.__module__, fromlist=["_"]).__file__)
+        assert module.parent == folder and module.name != "__init__.py", name
+        assert (STATIC / "teaching" / f"{name}.md").is_file() and teaching_text(name).startswith("# "), name

@@ -81,3 +81,18 @@ def ratchet_verdict(cycles, gamma) -> RatchetVerdict:
                           shakedown=shakedown, outlier_cycles=outliers, cycles_used=int(cycles.size), gamma=gamma,
                           dgamma_without_outliers=slope_smooth,
                           ratcheting_without_outliers=bool(rms_smooth < abs(slope_smooth)))
+
+
+def strain_fit(cycle_gamma, reference_cycle: int, verdict=None) -> dict | None:
+    """The strain per cycle fitted from ``reference_cycle`` on, given (cycle, γ) pairs (None
+    before three cycles); the line passes through the mean of the fitted points. ``verdict``:
+    the :func:`ratchet_verdict` of those cycles if already known (a preset keeps it)."""
+    used = [(c, g) for c, g in cycle_gamma if c >= reference_cycle]
+    if len(used) < 3:
+        return None
+    cycles, gammas = np.array(used, dtype=float).T
+    v = verdict or ratchet_verdict(cycles, gammas)
+    gamma_ref = dict(cycle_gamma)[reference_cycle]
+    return {"reference_cycle": reference_cycle, "gamma_ref": gamma_ref, "dgamma": v.dgamma,
+            "rms": v.rms_deviation, "ratcheting": v.ratcheting, "cycles_used": v.cycles_used,
+            "mean_cycle": float(np.mean(cycles)), "mean_gamma": float(np.mean(v.gamma))}
