@@ -1,1 +1,1 @@
-"""GranLab's live browser lab (panel/bokeh dashboard and viser scene); see the README."""
+"""GranLab's live browser lab (panel/bokeh dashboard and viser scene); see docs/lab.md."""

@@ -1,4 +1,4 @@
-"""The scaling curve of the README: ``granlab bench --scaling`` drawn as cost per particle-step
+"""The scaling curve of docs/performance.md: ``granlab bench --scaling`` drawn as cost per particle-step
 and bytes per disk against the number of disks.
 
     python docs/scaling.py [--out docs/images/scaling.png] [--steps 1000]

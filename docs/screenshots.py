@@ -1,4 +1,4 @@
-"""Screenshots of the lab, one per preset, at 1920×1080 and 1366×768 (the README shows them).
+"""Screenshots of the lab, one per preset, at 1920×1080 and 1366×768 (docs/lab.md shows them).
 
     python docs/screenshots.py [--out docs/images] [--sizes 1920x1080,1366x768] [--presets a,b]
 

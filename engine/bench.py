@@ -206,7 +206,7 @@ def prepared_packing(path: str | Path, particles: int = ANALYSIS_PARTICLES, seed
     if path.exists():
         return None
     law = gilabert_law(friction=0.5, cohesion=False, pressure=1e-2)
-    # the per-length cell mass made the packings the README's analysis figures were measured on
+    # the per-length cell mass made the packings docs/performance.md's analysis figures were measured on
     prepared = method1(count=particles, pressure=1e-2, law=law, seed=seed, cell_mass_reading="per-length")
     with RunWriter(path, prepared.sim, protocol={"command": "bench --analysis", "method": "1", "seed": seed,
                                                  "equilibrated": prepared.equilibrated}) as writer:

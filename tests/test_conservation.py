@@ -200,7 +200,7 @@ def test_a_frictional_collision_books_the_energy_its_spring_lets_go_to_second_or
     (1.0, 0.0, 0.6, "cundall-strack", 1.0), (1.0, 0.1, 0.6, "alpha", 1.0), (0.5, 0.0, 0.4, "angle", 0.5)])
 def test_the_unbooked_share_of_oblique_collisions_falls_faster_than_dt(friction, damping_ratio, offset, model,
                                                                         stiffness_ratio):
-    """What ``granlab run`` and the README claim: over dt_safety 0.08 -> 0.005 (16x) the share
+    """What ``granlab run`` and docs/engine.md claim: over dt_safety 0.08 -> 0.005 (16x) the share
     fell 59x to 10^4x (orders 1.5 to 3.3: not a clean second order, as the contacts open and close
     within a step); "second order" was claimed before."""
     coarse, fine = (abs(_oblique_collision(safety, friction, damping_ratio, (-1.0, offset), model, stiffness_ratio))

@@ -3,7 +3,7 @@
 A scene has the sections ``[simulation]``, ``[contact]``, ``[particles]`` (explicit
 ``[[particles.disk]]`` entries and/or generated ``[[particles.lattice]]`` and
 ``[[particles.gas]]`` groups), and optionally ``[box]``, ``[[walls]]`` and ``[cell]``.
-The README documents every key. A broken file raises :class:`SceneError` naming the key
+docs/scenes.md documents every key. A broken file raises :class:`SceneError` naming the key
 and what is allowed.
 """
 

