@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 
 from .errors import ParameterError
@@ -51,7 +52,25 @@ TANGENTIAL = {model.name: model for model in (
 """The one registry of tangential models, by name; every other list of them is made from it. The
 kernels of a model are the module of :mod:`granlab.engine.kernels.tangential` named after it."""
 TANGENTIAL_MODELS = tuple(TANGENTIAL)
-NORMAL_MODELS = ("linear", "area")
+
+
+@dataclass(frozen=True)
+class NormalModel:
+    """A normal elastic law: its ``name`` (scenes, the command line, ``ContactLaw.normal_model``),
+    the ``code`` the kernels switch on, its ``title`` in words and its ``label`` in a legend."""
+
+    name: str
+    code: int
+    title: str
+    label: str
+
+
+NORMAL = {model.name: model for model in (
+    NormalModel("linear", 0, "linear spring N^e = -K_n D_n (ratcheting Eq. 6)", "linear"),
+    NormalModel("area", 1, "force proportional to the overlap area, N^e = K_n A / (r_i + r_j) (ratcheting Sec. II B)",
+                "overlap area"))}
+"""The one registry of normal elastic laws, by name; the kernels' codes and every list come from it."""
+NORMAL_MODELS = tuple(NORMAL)
 WALL_MODES = ("fixed", "velocity", "force")
 CELL_CONTROLS = ("fixed", "stress", "strain-rate")
 
@@ -86,6 +105,16 @@ def nonnegative(name: str, value, allow_inf: bool = False) -> float:
         allowed = "a number >= 0" + (" or inf" if allow_inf else " (finite)")
         raise ParameterError(name, value, allowed)
     return value
+
+
+def whole(name: str, value, least: int = 0, most: int | None = None) -> int:
+    """``value`` as an int: a whole number (not a bool) from ``least`` to ``most`` (no upper bound
+    without ``most``)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least \
+            or (most is not None and value > most):
+        raise ParameterError(name, value, f"a whole number from {least} to {most}" if most is not None
+                             else f"a whole number >= {least}")
+    return int(value)
 
 
 def choice(name: str, value, choices: tuple[str, ...]) -> str:

@@ -23,15 +23,13 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
                              ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, elastic_normal_forces, energy_terms,
                              rolling_distance)
 from .kernels.contacts import TALLY_SIZE
-from .kernels.laws import (D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, NORMAL_AREA, NORMAL_LINEAR, ZETA,
-                           ZETA_R)
-from .params import (CELL_CONTROLS, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall, finite,
-                     positive)
+from .kernels.laws import D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, ZETA, ZETA_R
+from .params import (CELL_CONTROLS, NORMAL, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall,
+                     finite, positive, whole)
 from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, STATUS_SLIDE_NEG,
                     STATUS_SLIDE_POS, STATUS_STICK, WALL_VELOCITY, CellState, ContactTable, ParticleState, RunOptions,
                     WallState, Workspace)
 
-NORMAL_CODES = {"linear": NORMAL_LINEAR, "area": NORMAL_AREA}
 
 #: largest number of contacts per disk assumed by the time-step bound (2D, equal disks)
 Z_MAX = 6
@@ -403,7 +401,7 @@ class Simulation:
 
     @property
     def normal_model_code(self) -> int:
-        return NORMAL_CODES[self.law.normal_model]
+        return NORMAL[self.law.normal_model].code
 
     @property
     def tangential_model_code(self) -> int:
@@ -455,9 +453,7 @@ class Simulation:
         A diverging run raises :class:`DivergenceError` and the simulation is restored to
         its state before the block of steps that failed (at most ``CHECKPOINT_STEPS`` earlier).
         """
-        if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
-            raise ParameterError("n_steps", n_steps, "a whole number >= 0")
-        remaining = int(n_steps)
+        remaining = whole("n_steps", n_steps, 0)
         while remaining > 0:
             block = min(remaining, CHECKPOINT_STEPS)
             saved = self._checkpoint()

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from granlab.engine import ContactLaw, Integration, ParticleState, Simulation
+from granlab.engine import ContactLaw, Integration, ParameterError, ParticleState, Simulation
 from granlab.engine.params import TANGENTIAL
 from granlab.engine.protocols import teaching
 
@@ -81,3 +81,33 @@ def test_any_number_of_models_gets_a_colour_and_a_line_of_its_own():
     assert MODEL_STYLES == model_styles(TANGENTIAL)
     assert [line[2:] for line in LINES["springs"]["lines"]] == [(m.label, *MODEL_STYLES[m.name])
                                                                 for m in TANGENTIAL.values()]
+
+
+def test_the_kernels_dispatch_from_python_to_each_model_s_own_kernel():
+    """The dispatchers the contact loop compiles per model returned None when called from Python."""
+    from granlab.engine.kernels import tangential
+
+    row = tangential.RowGeometry(1.0, 0.0, 1.9, 0.0, 0.0, 0.3, 1.0, 0.9, 0.1, 0.2, 0.05, 0.1, False, 0.0, 0.0, 0.0)
+    for model in TANGENTIAL.values():
+        own = tangential.MODELS[model.code]
+        assert tangential.spring_rate(model.code, 0.3, 0.1, 1.02) == own.spring_rate(0.3, 0.1, 1.02) is not None
+        assert tangential.trial_spring(model.code, 0.01, 0.2, 1e-3, False, row) == \
+            own.trial_spring(0.01, 0.2, 1e-3, False, row)
+        assert tangential.limit(model.code, 100.0, 0.5, 0.0, 1.0, 1.0, 0.02, 0.1) == \
+            own.limit(100.0, 0.5, 0.0, 1.0, 1.0, 0.02, 0.1)
+        assert tangential.centre_factor(model.code, 1.02) == own.centre_factor(1.02)
+        assert tangential.whole_step_dashpots(model.code) is model.whole_step_dashpots
+
+
+def test_normal_laws_have_one_registry_the_kernels_and_the_simulation_read():
+    from granlab.engine.kernels import laws
+    from granlab.engine.params import NORMAL, NORMAL_MODELS
+
+    assert NORMAL_MODELS == tuple(NORMAL) == ("linear", "area")
+    assert (laws.NORMAL_LINEAR, laws.NORMAL_AREA) == (NORMAL["linear"].code, NORMAL["area"].code)
+    assert len({model.code for model in NORMAL.values()}) == len(NORMAL)
+    for name, model in NORMAL.items():
+        sim = periodic_gas(count=20, length=12.0, law=ContactLaw(normal_model=name))
+        assert sim.normal_model_code == model.code
+    with pytest.raises(ParameterError, match="one of 'linear', 'area'"):
+        ContactLaw(normal_model="hertz")

@@ -13,6 +13,7 @@ import math
 
 from numba import njit
 
+from ..params import NORMAL
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL
 
@@ -20,7 +21,7 @@ from .jit import KERNEL
 KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R, ZETA_R = range(10)
 LAW_SIZE = 10
 
-NORMAL_LINEAR, NORMAL_AREA = 0, 1
+NORMAL_LINEAR, NORMAL_AREA = NORMAL["linear"].code, NORMAL["area"].code
 
 TWO_PI = 2.0 * math.pi
 

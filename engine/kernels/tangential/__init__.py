@@ -15,7 +15,8 @@ Whether the dashpots (normal, tangential, rolling) take the velocities predicted
 or the half-step ones is the registry's ``whole_step_dashpots``.
 
 The functions below dispatch on a model code known when the contact loop is compiled (a literal):
-each model gets its own loop, with its laws inlined, and nothing is decided per row. Adding a model
+each model gets its own loop, with its laws inlined, and nothing is decided per row. Called from
+Python (a test, a notebook), they run the model's own kernel. Adding a model
 is its module here and its line in the registry.
 """
 
@@ -48,22 +49,27 @@ def _model(code):
 
 def spring_rate(model, vt, spin_sum, alpha):
     """``dD_t/dt`` of model ``model`` (a compile-time code)."""
+    return MODELS[model].spring_rate(vt, spin_sum, alpha)
 
 
 def trial_spring(model, previous, rate, dt, fresh, row):
     """``D_t`` before the Coulomb limit."""
+    return MODELS[model].trial_spring(previous, rate, dt, fresh, row)
 
 
 def limit(model, kt, mu, gamma_t, ne, fn, trial, rate):
     """``(D_t, F_t, status, slip)`` after the Coulomb limit."""
+    return MODELS[model].limit(kt, mu, gamma_t, ne, fn, trial, rate)
 
 
 def centre_factor(model, alpha):
     """The factor of ``F_t`` on the centres."""
+    return MODELS[model].centre_factor(alpha)
 
 
 def whole_step_dashpots(model):
     """Whether the dashpots take the velocities predicted at the whole step."""
+    return _WHOLE_STEP_DASHPOTS[model]
 
 
 @overload(spring_rate, prefer_literal=True)
