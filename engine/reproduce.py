@@ -44,7 +44,7 @@ from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
 from .observables import coordination as observed_coordination
-from .params import nonnegative
+from .params import nonnegative, whole
 from .studies import STUDY_LIMITS
 
 PHI_I = 0.36
@@ -195,9 +195,7 @@ class Reproduction:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
         for key, least, most in (("particles", 2, STUDY_LIMITS["particles"]), ("samples", 1, STUDY_LIMITS["samples"]),
                                  ("cell_mass_disks", 1, STUDY_LIMITS["particles"])):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not least <= value <= most:
-                raise ParameterError(key, value, f"a whole number from {least} to {most}")
+            whole(key, getattr(self, key), least, most)
         if not 0 < self.max_time <= MAX_STAGE_TIME:
             raise ParameterError("max_time", self.max_time, f"a duration > 0 and at most {MAX_STAGE_TIME:g} T0 (each "
                                                             f"stage of a sample would otherwise run for days)")

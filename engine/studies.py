@@ -27,7 +27,7 @@ from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
 from .observables import columns, touching
-from .params import TANGENTIAL_MODELS, finite, nonnegative, positive
+from .params import TANGENTIAL_MODELS, finite, nonnegative, positive, whole
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
@@ -67,10 +67,7 @@ class RatchetStudy:
 
     def __post_init__(self):
         for name in ("particles", "samples", "cycles"):
-            value = getattr(self, name)
-            most = STUDY_LIMITS[name]
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= most:
-                raise ParameterError(name, value, f"a whole number from 1 to {most}")
+            whole(name, getattr(self, name), 1, STUDY_LIMITS[name])
         low, high = STUDY_LIMITS["period"]
         if not low <= self.period <= high:
             raise ParameterError("period", self.period, f"from {low:g} to {high:g} τ (quasi-static loading is slow "

@@ -180,3 +180,15 @@ def test_scene_errors_name_the_key_and_what_is_allowed():
             parse_scene(text, origin="test.toml")
         assert expected in str(error.value), str(error.value)
         assert str(error.value).startswith("test.toml")
+
+
+def test_one_whole_number_check_names_both_bounds():
+    """Every count of the engine (steps, cycles, disks, samples, seeds...) goes through one check."""
+    from granlab.engine.params import whole
+
+    assert whole("cycles", np.int64(3), 1) == 3 and type(whole("cycles", np.int64(3), 1)) is int
+    for value in (True, 2.0, "3", 0, None):
+        with pytest.raises(ParameterError, match=f"cycles = {value!r} is not allowed: a whole number >= 1"):
+            whole("cycles", value, 1)
+    with pytest.raises(ParameterError, match="seed = 4294967296 is not allowed: a whole number from 0 to 4294967295"):
+        whole("seed", 2 ** 32, 0, 2 ** 32 - 1)

@@ -37,6 +37,7 @@ import scipy.special
 
 from ..errors import GranLabError, ParameterError
 from ..kernels.grid import label_moments, paint_disks, shell_sums
+from ..params import whole
 
 MAX_CELLS = 80_000_000
 """Largest grid allowed: 8e7 cells, about 1 GB at the peak (the field in float32 and its transform,
@@ -187,8 +188,7 @@ def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE)
     lengths = _box(box_lengths)
     if field.ndim != 2 or min(field.shape) < 2:
         raise ParameterError("field", f"shape {field.shape}", "a 2D grid, at least 2 cells each way")
-    if not isinstance(bins_per_decade, (int, np.integer)) or bins_per_decade < 1:
-        raise ParameterError("bins_per_decade", bins_per_decade, "a whole number >= 1")
+    whole("bins_per_decade", bins_per_decade, 1)
     nx, ny = field.shape
     dx, dy = lengths[0] / nx, lengths[1] / ny
     spectrum = scipy.fft.rfft2(field.astype(np.float32), workers=-1, overwrite_x=True)
@@ -495,8 +495,7 @@ def curdled_blob(kept: int, generations: int, rng: np.random.Generator) -> np.nd
     chosen at random, are kept and the pattern is turned about the centre by a random angle, and
     so on in every kept square down to squares of side 1, whose centres are returned. Its mass
     dimension is ``log(kept) / log 3`` between 1 and ``3^generations``."""
-    if not isinstance(kept, (int, np.integer)) or not 1 <= kept <= 9:
-        raise ParameterError("kept", kept, "a whole number of squares out of 9 (1 to 9)")
+    whole("kept", kept, 1, 9)
     if not isinstance(generations, (int, np.integer)) or generations < 1 or kept ** generations > 10 ** 7:
         raise ParameterError("generations", generations, "a whole number >= 1 with kept^generations <= 1e7")
     centres = np.zeros((1, 2))

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ParameterError
-from ..params import Load, finite, nonnegative, positive
+from ..params import Load, finite, nonnegative, positive, whole
 from ..simulation import Simulation
 
 
@@ -90,8 +90,7 @@ def run_cycles(sim: Simulation, load: CyclicLoad, cycles: int, on_cycle=None, sa
     > 0, ``on_sample(sim)`` is called that many times per cycle (e.g. to record the paths of
     contacts in the Coulomb cone). ``series`` continues an earlier record.
     """
-    if isinstance(cycles, bool) or not isinstance(cycles, (int, np.integer)) or cycles <= 0:
-        raise ParameterError("cycles", cycles, "a whole number of cycles > 0")
+    whole("cycles", cycles, 1)
     series = series if series is not None else CycleSeries()
     per_cycle = steps_per_cycle(sim, load)
     first = series.cycle[-1] if series.cycle else 0

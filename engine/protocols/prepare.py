@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..generate import radii, random_gas, square_lattice
 from ..observables import clusters, columns
-from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, nonnegative, positive
+from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, nonnegative, positive, whole
 from ..simulation import Simulation
 from ..state import CELL_MASS_FRACTION, ParticleState, default_cell_mass
 from .equilibrium import EquilibriumReport, Progress, advance, equilibrium, measured_pressure, relax
@@ -84,8 +84,7 @@ def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness
     pressure on 5600 disks still swung by 8 % at t = 12. Walls of one row are damped by the
     packing within a fraction of tau.
     """
-    if not isinstance(count, (int, np.integer)) or count < 1:
-        raise ParameterError("particles", count, "a whole number >= 1")
+    whole("particles", count, 1)
     pressure = positive("pressure", pressure)
     side = math.ceil(math.sqrt(count))
     r_max = box / (2.0 * side)
@@ -202,8 +201,7 @@ def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = N
     paper's size."""
     count = len(radii)
     disks = count if disks is None else disks
-    if isinstance(disks, bool) or not isinstance(disks, (int, np.integer)) or disks < 1:
-        raise ParameterError("cell_mass_disks", disks, "a whole number >= 1")
+    whole("cell_mass_disks", disks, 1)
     check_cell_mass_reading(reading)
     grain_mass = 4.0 / diameter ** 2 * float(np.sum(np.asarray(radii) ** 2))
     if reading == "mass":

@@ -6,10 +6,9 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-import numpy as np
 
 from ..errors import ParameterError
-from ..params import ContactLaw, finite, nonnegative, positive
+from ..params import ContactLaw, finite, nonnegative, positive, whole
 
 CONTROL_LABELS = {
     "particles": "Disks N", "seed": "Seed", "pressure": "Pressure P0", "amplitude": "Amplitude Δσ",
@@ -46,11 +45,8 @@ class LabSettings:
     frames_per_cycle: float = 10.0
 
     def __post_init__(self):
-        if isinstance(self.particles, bool) or not isinstance(self.particles, (int, np.integer)) \
-                or not 1 <= self.particles <= 20000:
-            raise ParameterError("particles", self.particles, "a whole number from 1 to 20000")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2 ** 32:
-            raise ParameterError("seed", self.seed, f"a whole number from 0 to {2 ** 32 - 1}")
+        whole("particles", self.particles, 1, 20000)
+        whole("seed", self.seed, 0, 2 ** 32 - 1)
         positive("pressure", self.pressure)
         nonnegative("amplitude", self.amplitude)
         positive("period", self.period)

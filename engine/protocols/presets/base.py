@@ -15,6 +15,7 @@ import numpy as np
 
 from ...errors import ParameterError
 from ...observables import columns, coordination, sliding, solid_fraction
+from ...params import whole
 from ...simulation import Simulation, Snapshot, side_by_side
 from ...state import ParticleState
 from ..measures import pair_label
@@ -155,8 +156,7 @@ class Preset(ABC):
         (recording the series) and frame time (calling ``on_frame``); returns the steps run.
         With ``deadline`` (a :func:`time.perf_counter` value) it returns at the first sample time
         after it, so that a caller slicing its work by wall clock is never held long."""
-        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-            raise ParameterError("steps", steps, "a whole number >= 1")
+        whole("steps", steps, 1)
         done = 0
         while done < steps and (deadline is None or done == 0 or time.perf_counter() < deadline):
             done += self._advance(min(int(steps) - done, self.steps_to_next_sample()))
