@@ -60,10 +60,10 @@ def disk_contacts(counted, i, j, n: int) -> tuple[np.ndarray, np.ndarray]:
     return with_disks, np.bincount(i[counted & (j >= n)], minlength=n)
 
 
-def backbone(counted, i, j, n: int) -> tuple[float, float, int]:
-    """``(z, z*, rattlers)`` over the ``counted`` rows: a rattler has none (with disks or walls);
-    ``z* = 2 M / (N - rattlers)`` (Gilabert Eq. 13), 0 when every disk rattles."""
-    with_disks, with_walls = disk_contacts(counted, i, j, n)
+def backbone(with_disks, with_walls) -> tuple[float, float, int]:
+    """``(z, z*, rattlers)`` from the per-disk counts of :func:`disk_contacts`: a rattler has none
+    (with disks or walls); ``z* = 2 M / (N - rattlers)`` (Gilabert Eq. 13), 0 when every disk rattles."""
+    n = len(with_disks)
     rattlers = int(np.count_nonzero(with_disks + with_walls == 0))
     pairs = int(with_disks.sum()) // 2
     return 2.0 * pairs / n, (2.0 * pairs / (n - rattlers) if n > rattlers else 0.0), rattlers

@@ -33,9 +33,9 @@ def test_coordination_counts_disk_pairs_only_and_distant_pairs_on_request():
 def test_backbone_rattlers_and_z_star():
     with_disks, with_walls = observables.disk_contacts(observables.touching(STATUS), I, J, N)
     assert with_disks.tolist() == [2, 2, 2, 0, 0] and with_walls.tolist() == [1, 0, 0, 0, 0]
-    z, z_star, rattlers = observables.backbone(observables.touching(STATUS), I, J, N)
+    z, z_star, rattlers = observables.backbone(with_disks, with_walls)
     assert (z, z_star, rattlers) == (6 / 5, 6 / 3, 2)
-    assert observables.backbone(np.zeros(6, dtype=bool), I, J, N) == (0.0, 0.0, 5)
+    assert observables.backbone(*observables.disk_contacts(np.zeros(6, dtype=bool), I, J, N)) == (0.0, 0.0, 5)
 
 
 def test_clusters_join_touching_and_distant_cohesive_pairs():

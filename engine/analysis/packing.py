@@ -93,8 +93,8 @@ def packing_stats(state, force_scale_value: float | None = None, area: float | N
     scale = force_scale(state) if force_scale_value is None else force_scale_value
     force = np.hypot(c.normal_force, c.tangential_force)
     carrying = interacting(c.status) & ((force > RATTLER_FORCE_TOLERANCE * scale) | (not forces_known))
-    per_disk, _ = disk_contacts(carrying, c.i, c.j, n)
-    z, z_star, rattlers = backbone(carrying, c.i, c.j, n)
+    per_disk, with_walls = disk_contacts(carrying, c.i, c.j, n)
+    z, z_star, rattlers = backbone(per_disk, with_walls)
     phi = solid_fraction(state.radii, state.box_lengths, area)
     stats = dict(phi=phi, z=z, z_star=z_star, rattlers=rattlers,
                  contacts=int(per_disk.sum()) // 2, particles=n, coordination=(np.bincount(per_disk) / n).tolist(),
