@@ -1,6 +1,6 @@
 """The ``granlab`` command: the engine's commands (:mod:`granlab.engine.cli`), ``serve`` (the lab),
 ``render`` (pictures and movies of a run file, :mod:`granlab.app.render`), ``export`` (run files for
-ParaView, OVITO and MDAnalysis, :mod:`granlab.app.export`) and ``bench --lab`` (the lab's benchmark)."""
+ParaView, OVITO and MDAnalysis, :mod:`granlab.engine.io.export`) and ``bench --lab`` (the lab's benchmark)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import time
 
 from granlab.engine import cli as engine_cli
 from granlab.engine.errors import GranLabError
+from granlab.engine.io.export import EXPORT_FORMATS, export_run, print_summary as print_export_summary
 
 
 def build_parser():
@@ -45,14 +46,13 @@ def build_parser():
     render.add_argument("--force", action="store_true", help="write over existing pictures or movies")
     render.add_argument("--json", action="store_true", help="print one JSON object")
     render.set_defaults(handler=_render, printer=_print_render)
-    export = commands.add_parser("export", help="frames of a run file for ParaView (vtk), OVITO (xyz, lammps) or "
-                                                "MDAnalysis (h5md)")
+    export = commands.add_parser("export", help=f"frames of a run file for other tools ({', '.join(EXPORT_FORMATS)})")
     export.add_argument("runfile", help="a GranLab run file")
-    export.add_argument("--format", required=True, metavar="FORMAT",
-                        help="vtk (a folder: .pvd and .vtu files), xyz (extended XYZ), lammps (dump custom, and a "
-                             "dump local of the contacts beside it) or h5md (3D H5MD for MDAnalysis)")
+    export.add_argument("--format", required=True, choices=EXPORT_FORMATS, metavar="FORMAT",
+                        help="; ".join(f"{fmt.name} ({fmt.title})" for fmt in EXPORT_FORMATS.values()))
     export.add_argument("--out", required=True, metavar="DIR|FILE",
-                        help="a folder for vtk; a FILE.xyz, FILE.dump or FILE.h5md for the others")
+                        help="; ".join(f"{f'FILE{fmt.suffix}' if fmt.suffix else 'a folder'} for {fmt.name}"
+                                       for fmt in EXPORT_FORMATS.values()))
     export.add_argument("--frames", metavar="A:B:S",
                         help="a frame K or a range A:B:S, negative counting from the end (default: every frame)")
     export.add_argument("--force", action="store_true", help="write over existing files")
@@ -96,15 +96,12 @@ def _print_render(result: dict) -> None:
 
 
 def _export(args) -> dict:
-    from .export import export_run
-
-    return export_run(args.runfile, args.format, args.out, args.frames, args.force, progress=_FrameProgress("exporting"))
+    return export_run(args.runfile, args.format, args.out, args.frames, args.force,
+                      progress=_FrameProgress("exporting"))
 
 
 def _print_export(result: dict) -> None:
-    from .export import print_summary
-
-    print_summary(result)
+    print_export_summary(result)
 
 
 def main(argv: list[str] | None = None) -> int:

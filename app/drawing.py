@@ -1,18 +1,17 @@
-"""What a picture of the lab shows and in which colours, shared by the live 3D scene
-(:mod:`granlab.app.scene`), the movies of ``granlab render`` (:mod:`granlab.app.render`) and the legends.
+"""The colours of a picture of the lab, shared by the live 3D scene (:mod:`granlab.app.scene`), the
+movies of ``granlab render`` (:mod:`granlab.app.render`) and the legends.
 
-A :class:`SceneFrame` holds one picture of the simulation: disks in the plane with their
-per-disk colour fields, the force network, walls, the periodic cell and the watched contacts.
-Colours are sRGB triples as they should appear on screen. Nothing here imports viser or
-matplotlib.
+A picture is a :class:`granlab.engine.frames.SceneFrame` (its geometry, in the engine so that the
+headless export writes the same fields); here are its colour fields, palettes, line classes,
+caption, bounds and legends. Colours are sRGB triples as they should appear on screen. Nothing
+here imports viser or matplotlib.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from granlab.engine.frames import SceneFrame
 from granlab.engine.state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 COLOR_FIELDS = ("rotation", "coordination", "pressure", "sliding")
@@ -39,7 +38,7 @@ CELL_COLOR = (110, 110, 170)
 MECHANISM_COLOR = (0, 150, 60)
 CONTACT_KINDS = (("compressive", COMPRESSIVE_COLOR), ("tensile (cohesion)", TENSILE_COLOR),
                  ("sliding", SLIDING_CONTACT_COLOR))
-"""Name and colour of each contact kind of :attr:`SceneFrame.contact_kind` (0, 1, 2)."""
+"""Name and colour of each contact kind of :attr:`granlab.engine.frames.SceneFrame.contact_kind` (0, 1, 2)."""
 
 WATCHED_COLORS = np.array(
     [(230, 0, 140), (0, 150, 80), (0, 150, 200), (120, 60, 190), (140, 90, 40), (150, 150, 0), (90, 90, 90),
@@ -100,54 +99,6 @@ PRESSURE_LUT = _lookup_table(
 PALETTES = {"rotation": ROTATION_LUT, "coordination": COORDINATION_COLORS, "pressure": PRESSURE_LUT,
             "sliding": SLIDING_DISK_COLORS}
 """The table each colour field indexes (sRGB)."""
-
-
-@dataclass(frozen=True)
-class SceneFrame:
-    """One picture of the simulation (2D disks in the x-y plane).
-
-    N disks, M contacts, W walls, K watched contacts; lengths in simulation units.
-    """
-
-    positions: np.ndarray      # (N, 2) float64 disk centres
-    radii: np.ndarray          # (N,) float64
-    angles: np.ndarray         # (N,) float64 rotation angle theta of each disk (radians)
-    coordination: np.ndarray   # (N,) int number of contacts of each disk
-    pressure: np.ndarray       # (N,) float64 a per-disk pressure value (>= 0)
-    sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
-    contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
-    contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
-    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
-    walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
-    cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
-    watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
-    watched_index: np.ndarray | None = None  # (K,) int: position of each watched segment's pair in
-    #                                           the watch list (its colour); None: 0, 1, 2, ...
-    labels: tuple[tuple[str, float, float], ...] = ()  # (text, x, y): a name whose top centre is at (x, y)
-
-    def __post_init__(self) -> None:
-        sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
-                 "M": np.shape(self.contacts)[0] if np.ndim(self.contacts) else 0}
-        expected = {
-            "positions": ("N", 2), "radii": ("N",), "angles": ("N",), "coordination": ("N",),
-            "pressure": ("N",), "sliding": ("N",), "contacts": ("M", 2, 2), "contact_force": ("M",),
-            "contact_kind": ("M",), "walls": ("W", 2, 2), "watched": ("K", 2, 2),
-        }
-        for name, shape in expected.items():
-            actual = np.shape(getattr(self, name))
-            wanted = tuple(sizes.get(d, a) if isinstance(d, str) else d for d, a in zip(shape, actual))
-            if actual != wanted or len(actual) != len(shape):
-                allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
-                raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
-                                 f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
-        if self.watched_index is None:
-            object.__setattr__(self, "watched_index", np.arange(len(self.watched)))
-        elif np.shape(self.watched_index) != (len(self.watched),):
-            raise ValueError(f"SceneFrame.watched_index has shape {np.shape(self.watched_index)}; allowed: "
-                             f"({len(self.watched)},), one index per watched segment")
-        if self.cell is not None and (len(self.cell) != 2 or not all(np.isfinite(self.cell))
-                                      or min(self.cell) < 0.0):
-            raise ValueError(f"SceneFrame.cell = {self.cell!r}; allowed: None or two finite lengths >= 0")
 
 
 def color_index(frame: SceneFrame, field: str, index: np.ndarray, scratch: np.ndarray) -> None:
@@ -228,13 +179,6 @@ def frame_bounds(frame: SceneFrame) -> tuple[float, float, float, float]:
     if len(x) == 0:
         return (-1.0, 1.0, -1.0, 1.0)
     return (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
-
-
-def cell_outline(cell: tuple[float, float]) -> np.ndarray:
-    """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
-    lx, ly = cell
-    corners = np.array([(0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)])
-    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
 
 
 def hex_color(rgb) -> str:

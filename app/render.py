@@ -32,14 +32,14 @@ from matplotlib.patches import Circle, PathPatch, Rectangle
 from matplotlib.path import Path as StrokePath
 
 from granlab.engine.errors import OutputError, ParameterError
+from granlab.engine.frames import FrameData, SceneFrame, build_frame, cell_outline
 from granlab.engine.io import h5md
+from granlab.engine.io.frame_selection import reporting, select_frames
 from granlab.engine.io.outputs import check_output, staged
 
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, COORDINATION_COLORS, FORCE_CLASSES, LABEL_SIZE,
                       PRESSURE_LUT, ROTATION_LUT, SLIDING_DISK_COLORS, SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS,
-                      WATCHED_THICKNESS, SceneFrame, cell_outline, disk_colors, force_class_thickness, force_classes,
-                      frame_bounds, frame_caption)
-from .frames import FrameData, build_frame
+                      WATCHED_THICKNESS, disk_colors, force_class_thickness, force_classes, frame_bounds, frame_caption)
 
 SUFFIXES = (".png", ".gif", ".mp4")
 """What :func:`write_movie` writes: one picture (or one per frame), an animated GIF, an H.264 movie."""
@@ -158,37 +158,6 @@ def check_fps(fps, name: str = "fps") -> float:
     if not 0.0 < value <= MAX_FPS:
         raise ParameterError(name, fps, allowed)
     return value
-
-
-def select_frames(spec, count: int, name: str = "frames") -> list[int]:
-    """Indices of the frames of a file of ``count`` frames that ``spec`` selects: a frame ``K``
-    or a range ``A:B:S`` (Python's slice; negative counts from the end; S > 0), as text, an int
-    or a slice. A range reaching outside the file or selecting nothing is refused."""
-    if isinstance(spec, slice):
-        text = ":".join("" if v is None else str(v) for v in (spec.start, spec.stop, spec.step))
-    else:
-        text = str(spec)
-    last = count - 1
-    allowed = f"a frame K or a range A:B:S (S > 0) within the file's frames 0..{last}, negative counting from the end"
-    parts = text.split(":")
-    try:
-        values = [int(part) if part.strip() else None for part in parts]
-    except ValueError:
-        raise ParameterError(name, text, allowed) from None
-    if len(values) > 3 or (len(values) == 1 and values[0] is None):
-        raise ParameterError(name, text, allowed)
-    if len(values) == 1:
-        if not -count <= values[0] < count:
-            raise ParameterError(name, text, allowed)
-        return [values[0] % count]
-    start, stop, step = (values + [None])[:3]
-    if ((step is not None and step <= 0) or (start is not None and not -count <= start < count)
-            or (stop is not None and not -count <= stop <= count)):
-        raise ParameterError(name, text, allowed)
-    indices = list(range(count))[start:stop:step]
-    if not indices:
-        raise ParameterError(name, text, f"a range selecting at least one of the file's frames 0..{last}")
-    return indices
 
 
 def _walls_cut_at_corners(frame: SceneFrame) -> SceneFrame:
@@ -677,26 +646,19 @@ def default_movie_frames(f, count: int) -> list[int]:
     return list(range(max(0, count - MOVIE_FRAMES), count))
 
 
-def reporting(frames: Iterator, total: int, progress: Callable[[int, int], None]) -> Iterator:
-    """``frames``, calling ``progress(done, total)`` as each one is taken (the caller reports the
-    end: a writer may stop asking after the last frame)."""
-    for done, frame in enumerate(frames):
-        progress(done, total)
-        yield frame
-
-
 def render_run(path, out, frames=None, size="1280x720", color_field: str = "rotation", forces: bool = True,
                fps=10.0, force: bool = False, progress: Callable[[int, int], None] | None = None) -> dict:
     """Render frames of a GranLab run file into ``out`` (:func:`write_movie`); what
     ``granlab render`` calls, so errors name its options. Existing pictures or movies are
     written over only with ``force``.
 
-    ``frames``: see :func:`select_frames`; default the last frame for ``.png``, the last ten
-    cycles (:func:`default_movie_frames`) for a movie. ``progress(done, total)`` is called as
-    frames are rendered. ``size`` (W, H) or ``"WxH"``; ``fps`` frames per second of a movie. The axes
-    are the union of the selected frames' bounds (read in a first pass, the frames rendered in
-    a second). Returns ``out``, the ``files`` written, ``frames`` (their count), ``indices``
-    (first and last), ``size`` [W, H], ``color``, ``forces``, ``fps`` and ``seconds_per_frame``.
+    ``frames``: see :func:`granlab.engine.io.frame_selection.select_frames`; default the last frame
+    for ``.png``, the last ten cycles (:func:`default_movie_frames`) for a movie.
+    ``progress(done, total)`` is called as frames are rendered. ``size`` (W, H) or ``"WxH"``;
+    ``fps`` frames per second of a movie. The axes are the union of the selected frames' bounds
+    (read in a first pass, the frames rendered in a second). Returns ``out``, the ``files``
+    written, ``frames`` (their count), ``indices`` (first and last), ``size`` [W, H], ``color``,
+    ``forces``, ``fps`` and ``seconds_per_frame``.
     """
     start = time.perf_counter()
     out = Path(out)

@@ -18,11 +18,11 @@ from granlab.engine.analysis.packing import packing_stats
 from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.analysis.states import PackingState, StateReader, detect_format, read_state
 from granlab.engine.errors import GranLabError
+from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.io import h5md
 from granlab.engine.io.outputs import staged
 from granlab.engine.protocols.presets import PRESETS
 
-from .frames import FrameData, build_frame
 
 MAX_REPLAY_BYTES = 2 * 2 ** 30
 """The largest file the lab replays: it holds every frame in memory (``granlab render`` and
@@ -231,7 +231,7 @@ def write_lab_movie(report, path: Path, frames: list, color: str, watched: list,
                     groups: list) -> str:
     """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
     the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend, the
-    ``groups`` of disks named under them (:func:`granlab.app.frames.group_labels`)."""
+    ``groups`` of disks named under them (:func:`granlab.engine.frames.group_labels`)."""
     from .render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
 
     scenes = [(build_frame([(data, (0.0, 0.0))], [watched], groups), caption) for data, caption in frames]

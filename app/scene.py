@@ -39,9 +39,11 @@ from viser import _messages as viser_messages
 import websockets.asyncio.server
 from websockets.http11 import Request
 
+from granlab.engine.frames import SceneFrame, cell_outline
+
 from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR, PALETTES, SPOKE_COLOR,
-                      WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, SceneFrame, cell_outline, color_index,
-                      force_class_thickness, force_classes, frame_bounds)
+                      WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_class_thickness, force_classes,
+                      frame_bounds)
 
 DISK_SEGMENTS = 16
 """Sides of the polygon standing for a disk: 60 triangles a disk (caps and

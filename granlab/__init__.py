@@ -30,7 +30,7 @@ _HOMES = {
                     "RatchetCurve", "Simulation", "TANGENTIAL_MODELS", "Wall", "analyze", "box_walls", "compress",
                     "export", "load_scene", "preset", "ratchet", "read", "read_all", "render", "save", "snapshot",
                     "table"),
-    "granlab.app.export": ("EXPORT_FORMATS",),
+    "granlab.engine.io.export": ("EXPORT_FORMATS",),
     "granlab.app.notebook": ("NotebookLab", "analysis_figure", "force_network_figure", "lab", "show",
                              "strain_figure"),
 }

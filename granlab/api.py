@@ -76,7 +76,7 @@ def save(sim: Simulation, path, overwrite: bool = False) -> Path:
 
 def export(run_file, format: str, out, frames=None, force: bool = False) -> dict:
     """Frames of a run file for another tool (``format`` in ``EXPORT_FORMATS``), as ``granlab export``."""
-    from granlab.app.export import export_run
+    from granlab.engine.io.export import export_run
 
     return export_run(run_file, format, out, frames, force)
 

@@ -24,11 +24,11 @@ from granlab.app.drawing import (
                                  ROTATION_LUT,
                                  SLIDING_DISK_COLORS,
                                  WATCHED_COLORS,
-                                 SceneFrame,
                                  force_class_thickness,
                                  force_classes,
                                  )
 from granlab.app.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
+from granlab.engine.frames import SceneFrame
 
 
 def small_frame(n=4, cell=(6.0, 4.0)):

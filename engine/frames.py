@@ -1,8 +1,12 @@
-"""Scene frames: what the 3D view draws, computed from a simulation state (or a run-file frame).
+"""Pictures of the packing as geometry, numpy only: the lab's scene, its movies and the headless export
+draw the same thing.
 
-The engine thread only copies the arrays a frame needs (:meth:`FrameData.from_simulation`, the
-contact rows in use); the scene thread builds the frame from that copy, so building never
-touches the live simulation and costs the engine thread nothing but the copy.
+A :class:`SceneFrame` is one picture: the disks with their coordination, pressure and sliding, the
+force network as segments, the walls, the periodic cell and the watched contacts.
+:func:`build_frame` computes it from :class:`FrameData`, a copy of the arrays it needs: the lab's
+engine thread only copies them (:meth:`FrameData.from_simulation`, the contact rows in use) and
+its scene thread builds the frame, so building never touches the live simulation and costs the
+engine thread nothing but the copy.
 """
 
 from __future__ import annotations
@@ -11,11 +15,57 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from granlab.engine.kernels.fields import contact_fields
-from granlab.engine.protocols.measures import pair_codes
-from granlab.engine.state import STATUS_NONE
+from .kernels.fields import contact_fields
+from .protocols.measures import pair_codes
+from .state import STATUS_NONE
 
-from .drawing import SceneFrame
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """One picture of the simulation (2D disks in the x-y plane).
+
+    N disks, M contacts, W walls, K watched contacts; lengths in simulation units.
+    """
+
+    positions: np.ndarray      # (N, 2) float64 disk centres
+    radii: np.ndarray          # (N,) float64
+    angles: np.ndarray         # (N,) float64 rotation angle theta of each disk (radians)
+    coordination: np.ndarray   # (N,) int number of contacts of each disk
+    pressure: np.ndarray       # (N,) float64 a per-disk pressure value (>= 0)
+    sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
+    contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
+    contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
+    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
+    walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
+    cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
+    watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)
+    watched_index: np.ndarray | None = None  # (K,) int: position of each watched segment's pair in
+    #                                           the watch list (its colour); None: 0, 1, 2, ...
+    labels: tuple[tuple[str, float, float], ...] = ()  # (text, x, y): a name whose top centre is at (x, y)
+
+    def __post_init__(self) -> None:
+        sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
+                 "M": np.shape(self.contacts)[0] if np.ndim(self.contacts) else 0}
+        expected = {
+            "positions": ("N", 2), "radii": ("N",), "angles": ("N",), "coordination": ("N",),
+            "pressure": ("N",), "sliding": ("N",), "contacts": ("M", 2, 2), "contact_force": ("M",),
+            "contact_kind": ("M",), "walls": ("W", 2, 2), "watched": ("K", 2, 2),
+        }
+        for name, shape in expected.items():
+            actual = np.shape(getattr(self, name))
+            wanted = tuple(sizes.get(d, a) if isinstance(d, str) else d for d, a in zip(shape, actual))
+            if actual != wanted or len(actual) != len(shape):
+                allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
+                raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
+                                 f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
+        if self.watched_index is None:
+            object.__setattr__(self, "watched_index", np.arange(len(self.watched)))
+        elif np.shape(self.watched_index) != (len(self.watched),):
+            raise ValueError(f"SceneFrame.watched_index has shape {np.shape(self.watched_index)}; allowed: "
+                             f"({len(self.watched)},), one index per watched segment")
+        if self.cell is not None and (len(self.cell) != 2 or not all(np.isfinite(self.cell))
+                                      or min(self.cell) < 0.0):
+            raise ValueError(f"SceneFrame.cell = {self.cell!r}; allowed: None or two finite lengths >= 0")
 
 
 @dataclass(frozen=True)
@@ -52,7 +102,6 @@ class FrameData:
                    status[rows], table.normal_force[rows], table.tangential_force[rows],
                    table.surface_gap[rows], sim.walls.normal.copy(), sim.walls.offset.copy(),
                    np.where(np.array(sim.periodic), sim.cell.length, 0.0))
-
 
     @classmethod
     def from_snapshot(cls, snap) -> "FrameData":
@@ -160,8 +209,9 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
         n, m = data.positions.shape[0], data.pair.shape[0]
         contact_fields(_f64(data.positions), _f64(data.radii), _i64(data.pair), _i64(data.image), _i64(data.status),
                        _f64(data.normal_force), _f64(data.tangential_force), _f64(data.surface_gap),
-                       _f64(data.wall_normal).reshape(-1, 2), _f64(data.cell), shift, coordination[n0:n0 + n], pressure[n0:n0 + n],
-                       sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m], kind[m0:m0 + m])
+                       _f64(data.wall_normal).reshape(-1, 2), _f64(data.cell), shift, coordination[n0:n0 + n],
+                       pressure[n0:n0 + n], sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m],
+                       kind[m0:m0 + m])
         positions.append(data.positions + shift)
         walls.append(_wall_segments(data) + shift)
         rows, index = _rows_of(data.pair, pairs)
@@ -178,3 +228,10 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                       watched=np.concatenate(watched_segments).reshape(-1, 2, 2),
                       watched_index=np.concatenate(watched_index).astype(np.int64),
                       labels=group_labels(positions, radii, groups))
+
+
+def cell_outline(cell: tuple[float, float]) -> np.ndarray:
+    """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
+    lx, ly = cell
+    corners = np.array([(0.0, 0.0), (lx, 0.0), (lx, ly), (0.0, ly)])
+    return np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
