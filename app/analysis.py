@@ -91,14 +91,14 @@ def network_segments(result: AnalysisResult) -> dict:
     """Columns for the force-network plot of a status analysis: one segment per contact from the
     centre of its first disk towards the second (or the wall), coloured by the status the solver
     found; critical contacts get a marker, red where the solver and the dynamics disagree."""
-    plots, state = result.report.plots, result.state
-    first, second, normal = plots["first"], plots["second"], plots["normal_vectors"]
+    found, state = result.report.result, result.state
+    net, critical = found.network, found.solution.critical
+    first, second = net.first, net.second
     start = state.positions[first]
     reach = state.radii[first] + np.where(second >= 0, state.radii[np.maximum(second, 0)], 0.0)
-    end = start - normal * reach[:, None]
-    sliding = plots["solver_sliding"]
-    critical = plots["critical"]
-    disagree = sliding[critical] != plots["dynamics_sliding"][critical]
+    end = start - net.normal * reach[:, None]
+    sliding = found.solution.sliding
+    disagree = sliding[critical] != net.sliding[critical]
     middle = 0.5 * (start + end)[critical]
     return {"segments": {"x0": start[:, 0], "y0": start[:, 1], "x1": end[:, 0], "y1": end[:, 1],
                          "color": np.where(sliding, "#d62728", "#1f77b4")},
@@ -108,7 +108,7 @@ def network_segments(result: AnalysisResult) -> dict:
 
 def force_scatter(result: AnalysisResult) -> dict:
     """(N, T) of every disk-disk interaction and the lines T = ±sqrt(3) N (Gilabert Fig. 14)."""
-    normal, tangential = result.report.plots["normal"], result.report.plots["tangential"]
+    normal, tangential = result.report.result.normal, result.report.result.tangential
     top = float(np.abs(normal).max()) if len(normal) else 1.0
     return {"points": {"normal": normal, "tangential": tangential},
             "lines": {"xs": [[-top, top], [-top, top]], "ys": [[-SQRT3 * top, SQRT3 * top],
@@ -117,20 +117,20 @@ def force_scatter(result: AnalysisResult) -> dict:
 
 def structure_curve(result: AnalysisResult) -> dict:
     """I(k) and its fit by Gilabert Eq. 28 (positive values, for log axes)."""
-    plots = result.report.plots
-    keep = (plots["k"] > 0) & (plots["intensity"] > 0)
-    return {"data": {"k": plots["k"][keep], "intensity": plots["intensity"][keep]},
-            "fit": {"k": plots["k"][keep], "fitted": plots["fitted"][keep]}}
+    fractal = result.report.result
+    keep = (fractal.k > 0) & (fractal.intensity > 0)
+    return {"data": {"k": fractal.k[keep], "intensity": fractal.intensity[keep]},
+            "fit": {"k": fractal.k[keep], "fitted": fractal.fitted[keep]}}
 
 
 def mechanism_arrows(result: AnalysisResult, head: float = 0.3) -> np.ndarray:
     """(S, 2, 2) segments: an arrow on each disk along the translation of the mode that collapses
     the packing, or else of the first null mode (none without one), the longest one disk
     diameter long; each arrow is a shaft and two head strokes."""
-    plots, state = result.report.plots, result.state
-    mode = plots.get("collapse_mode")
+    mechanisms, state = result.report.result, result.state
+    mode = mechanisms.collapse_mode
     if mode is None:
-        modes = plots.get("modes")
+        modes = mechanisms.modes
         if modes is None or modes.shape[1] == 0:
             return np.zeros((0, 2, 2))
         mode = modes[:, 0]

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import panel as pn
 
-from granlab.engine.analysis.report import ANALYSES
+from granlab.engine.analysis import ANALYSES
 from granlab.engine.params import TANGENTIAL_MODELS
 from granlab.engine.protocols.presets import PRESETS
 from granlab.engine.protocols.settings import CONTROL_LABELS

@@ -219,7 +219,8 @@ def analysis(path: str | Path, particles: int = ANALYSIS_PARTICLES, repeats: int
     """Wall time of every analysis of ``granlab analyze`` on the packing in ``path`` (prepared
     there first if missing), each run ``repeats`` times (the first compiles or loads kernels);
     the figures are the fastest run."""
-    from .analysis.report import ANALYSES, analyze
+    from .analysis import ANALYSES
+    from .analysis.report import analyze
     from .analysis.states import read_state
 
     preparation = prepared_packing(path, particles)

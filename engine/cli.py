@@ -699,7 +699,8 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_argument("runfile", metavar="FILE",
                          help="a GranLab run file, an H5MD file with positions, radii and a 2D box, a LAMMPS dump "
                               "custom (id x y radius|diameter) or an extended XYZ file (radius, Lattice, pbc)")
-    analyze.add_argument("analysis", choices=ANALYSES)
+    analyze.add_argument("analysis", choices=ANALYSES,
+                         help="; ".join(f"{name}: {analysis.title}" for name, analysis in ANALYSES.items()))
     analyze.add_argument("--frame", type=int, default=-1, help="frame index (negative counts from the end; default -1)")
     analyze.add_argument("--load", choices=LOADS, default="auto",
                          help="load increment of stiffness and status (default auto: the walls' loads, else random; "

@@ -13,7 +13,9 @@ import numpy as np
 from granlab.engine import cli
 from granlab.engine.analysis import ANALYSES
 from granlab.engine.analysis import report as rp
+from granlab.engine.analysis import rigidity as rg
 from granlab.engine.analysis import status as ss
+from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.report import MISSING, AnalysisReport, analyze
 from granlab.engine.analysis.states import PackingState, read_state
 from granlab.engine.generate import radii as make_radii, random_gas
@@ -88,7 +90,7 @@ def test_every_value_has_a_label_and_a_text_without_nan_inf_or_none():
         rows = report.rows()
         assert [row.key for row in rows] == list(report.values)
         for row in rows:
-            assert row.label in rp.LABELS.values(), (kind, row.key)
+            assert row.label == ANALYSES[kind].load().LABELS[row.key], (kind, row.key)
             assert not re.search(r"\b(nan|inf|None)\b", row.text, re.IGNORECASE), (name, kind, row)
             assert row.text, (name, kind, row)
             if row.text == MISSING:
@@ -155,15 +157,14 @@ def test_states_of_the_critical_contacts_in_words():
                           "2 states: contact 5–wall 'top' sliding; contacts 3–7, 5–wall 'top' sliding"),
                          ([], "none"),
                          ([""], "1 state: no critical contact")):
-        report = AnalysisReport("status", {"consistent_states": states}, {"critical_names": names})
-        assert report.rows()[0].text == text
+        assert ss.states_text(states, names) == text
     report = reports()[("sliding", "status")]
-    plots, values = report.plots, report.values
+    net, values = report.result.network, report.values
     assert values["critical_contacts"] == 3 and values["states_checked"] == 8
     described = []
     for state in values["consistent_states"]:
-        sliding = [f"{plots['first'][a]}–{plots['second'][a]}"
-                   for a, bit in zip(plots["critical"], state) if bit == "1"]
+        sliding = [f"{net.first[a]}–{net.second[a]}"
+                   for a, bit in zip(report.result.solution.critical, state) if bit == "1"]
         described.append(f"contact{'s' if len(sliding) > 1 else ''} {', '.join(sliding)} sliding" if sliding
                          else "none sliding")
     count = len(described)
@@ -173,8 +174,8 @@ def test_states_of_the_critical_contacts_in_words():
 
 def test_a_skipped_enumeration_and_unclassified_modes_say_why(monkeypatch):
     monkeypatch.setattr(ss, "MAX_ENUMERATED", 2)
-    monkeypatch.setattr(rp, "MODE_VECTORS", 1)
-    monkeypatch.setattr(rp, "RIGIDITY_MODE_VECTORS", 1)
+    monkeypatch.setattr(st, "MODE_VECTORS", 1)
+    monkeypatch.setattr(rg, "MODE_VECTORS", 1)
     status = rows_of(analyze(sliding_packing(), "status"))
     for key in ("states_checked", "consistent_states", "unstable_states", "bijective"):
         assert (status[key].text, status[key].note) == (MISSING, "not enumerated: too many critical contacts")

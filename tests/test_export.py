@@ -4,6 +4,7 @@ H5MD reader) and by GranLab's, and compared with the run file."""
 
 import functools
 import json
+import pkgutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
@@ -11,14 +12,18 @@ import xml.etree.ElementTree as ElementTree
 import numpy as np
 import pytest
 
-from granlab.app.export import contacts_dump_name
-from granlab.app.frames import FrameData, build_frame
+import granlab.engine.io.export as export_package
+from granlab.app.cli import build_parser
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
 from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.rigidity import rigidity
 from granlab.engine.analysis.states import read_state
+from granlab.engine.errors import ParameterError
+from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.generate import radii, random_gas
 from granlab.engine.io import h5md
+from granlab.engine.io.export import EXPORT_FORMATS, contacts_dump_name, export_run
 
 FRAMES = 3
 
@@ -165,7 +170,7 @@ def test_lammps_export_reads_back_with_its_contacts_as_the_run_file_does(run_fil
         raw = frames_of(run_file)[frame]
         kinetic = np.diag(np.sum(raw["mass"][:, None] * raw["velocity"] ** 2, axis=0)) / np.prod(raw["edges"])
         np.testing.assert_allclose(exported.stress + kinetic, original.stress, rtol=1e-9)  # contacts + kinetic
-        counts = [st.rigidity(st.network(s)) for s in (original, exported)]
+        counts = [rigidity(st.network(s)) for s in (original, exported)]
         assert counts[0] == counts[1]
     ovito_io = pytest.importorskip("ovito.io")
     data = ovito_io.import_file(str(out)).compute(FRAMES - 1)
@@ -192,11 +197,34 @@ def test_h5md_export_is_read_by_mdanalysis_in_a_3d_box(run_file, tmp_path):
     assert state.periodic == (True, True) and packing_stats(state).z == packing_stats(read_state(run_file)).z
 
 
+def test_the_format_registry_is_the_one_list_of_formats(tmp_path, capsys):
+    """Every format is one module of the export package and one entry of EXPORT_FORMATS, from which the
+    command's --format choices, the --out suffix checks and the errors naming the formats are read."""
+    modules = {f"{export_package.__name__}.{module.name}" for module in pkgutil.iter_modules(export_package.__path__)}
+    assert {fmt.module for fmt in EXPORT_FORMATS.values()} == modules
+    for name, fmt in EXPORT_FORMATS.items():
+        writer = fmt.writer()
+        assert fmt.name == name and fmt.title and callable(writer.files) and callable(writer.write), name
+        if fmt.suffix:
+            with pytest.raises(ParameterError, match=f"a file name ending in {fmt.suffix} for --format {name}"):
+                export_run(tmp_path / "run.h5", name, tmp_path / "frames.wrong")
+    commands = next(action for action in build_parser()._actions if action.dest == "command")
+    option = next(action for action in commands.choices["export"]._actions if action.dest == "format")
+    assert list(option.choices) == list(EXPORT_FORMATS)
+    assert all(f"{name} ({fmt.title})" in option.help for name, fmt in EXPORT_FORMATS.items())
+    with pytest.raises(ParameterError) as refused:
+        export_run(tmp_path / "run.h5", "pdb", tmp_path / "frames.pdb")
+    assert str(refused.value).endswith("one of " + ", ".join(EXPORT_FORMATS))
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["export", "run.h5", "--format", "pdb", "--out", "frames.pdb"])
+    assert "(choose from " + ", ".join(map(repr, EXPORT_FORMATS)) + ")" in capsys.readouterr().err
+
+
 def test_bad_exports_get_one_line_and_exit_2(run_file, tmp_path):
     (tmp_path / "taken.xyz").write_text("mine")
-    cases = [(("--format", "pdb", "--out", str(tmp_path / "x.pdb")), "--format = 'pdb' is not allowed"),
+    cases = [(("--format", "pdb", "--out", str(tmp_path / "x.pdb")), "--format: invalid choice: 'pdb'"),
              (("--format", "xyz", "--out", str(tmp_path / "x.dump")), "a file name ending in .xyz"),
-             (("--format", "vtk", "--out", str(tmp_path / "x.pvd")), "a folder for the .pvd and .vtu files"),
+             (("--format", "vtk", "--out", str(tmp_path / "x.pvd")), "a folder (a name without a suffix) for --format"),
              (("--format", "xyz", "--out", str(tmp_path / "taken.xyz")), "exists: give --force"),
              (("--format", "xyz", "--out", str(tmp_path / "x.xyz"), "--frames", "7"), "--frames = '7' is not allowed")]
     for args, message in cases:

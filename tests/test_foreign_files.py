@@ -9,6 +9,7 @@ import pytest
 
 from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.packing import packing_stats
+from granlab.engine.analysis.rigidity import rigidity
 from granlab.engine.analysis.states import read_state
 from granlab.engine.io.lammps import Dump
 from tests.test_cli import granlab
@@ -67,7 +68,7 @@ def test_the_lammps_packing_with_its_contacts_agrees_with_the_packing_rebuilt_fr
     touching = np.bincount(np.array(sorted(pairs)).ravel(), minlength=200)
     assert stats.rattlers == stats_geometric.rattlers == np.count_nonzero(touching == 0)
     for state in (with_forces, geometric):
-        counts = st.rigidity(st.network(state))
+        counts = rigidity(st.network(state))
         assert (counts.degrees_of_freedom, counts.constraints, counts.floppy_modes, counts.hyperstaticity) == \
             brute_force_rigidity(state)
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from granlab.engine.analysis.stiffness import (Network, null_space, quadratic_form, rigidity, stiffness_matrix,
-                                               network)
+from granlab.engine.analysis.rigidity import rigidity
+from granlab.engine.analysis.stiffness import Network, network, null_space, quadratic_form, stiffness_matrix
 from granlab.engine.params import ContactLaw
 from granlab.engine.protocols.prepare import gilabert_law, method1
 from granlab.engine.protocols.presets import make_preset, preset_settings
@@ -335,7 +335,7 @@ def test_k_with_the_cells_two_strain_degrees_of_freedom_predicts_the_engines_for
     counts = rigidity(net)
     assert counts.degrees_of_freedom == 3 * n + 2 and counts.balanced
 
-    from granlab.engine.analysis.report import load_increment
+    from granlab.engine.analysis.stiffness import load_increment
     from granlab.engine.errors import GranLabError
 
     increment, kind = load_increment(net, "cell")

@@ -38,7 +38,24 @@ import scipy.special
 from ..errors import GranLabError, ParameterError
 from ..kernels.grid import label_moments, paint_disks, shell_sums
 from ..params import whole
+from .report import AnalysisReport, Clock
 
+LABELS = {
+    "d_F": "Fractal dimension d_F (fit of Gilabert Eq. 28) [dimensionless]",
+    "d_F_error": "One-sigma error of d_F",
+    "xi": "Blob size ξ, the cut-off length of Eqs. 27–28 [length]",
+    "xi_error": "One-sigma error of ξ [length]",
+    "constant": "Constant Cst of Eq. 28 [length²]",
+    "ell": "Length ℓ of Eq. 27 [length]",
+    "phi": "Solid fraction Φ of the grid, the mean of χ [dimensionless]",
+    "spacing": "Grid cell dx × dy (Sec. V C: about a/100) [length]",
+    "shape": "Grid cells nx × ny",
+    "fit_range": "k range of the fit [1/length]",
+    "holes": "Holes: connected empty regions",
+    "mean_hole_radius_w": "Weighted mean hole radius ⟨R⟩_w (Gilabert Eq. 30) [length]",
+    "fit_error": "Fit of Eq. 28 to I(k) (Gilabert Eq. 25)",
+}
+"""The label of each value of the fractal analysis (:func:`run`)."""
 MAX_CELLS = 80_000_000
 """Largest grid allowed: 8e7 cells, about 1 GB at the peak (the field in float32 and its transform,
 0.3 GB each; 0.77 GB measured at 6.6e7 cells)."""
@@ -487,6 +504,13 @@ def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None,
 # ---------------------------------------------------------------- a fractal of known dimension
 
 _SUBSQUARES = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], dtype=float)
+
+
+def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
+    """The :class:`FractalAnalysis` of ``state`` at the default grid; ``load`` and ``seed`` are not used."""
+    result = fractal_analysis(state.positions, state.radii, state.box_lengths, lap=clock.lap)
+    return AnalysisReport("fractal", result.as_dict(), result, reasons=result.reasons,
+                          figures=("structure",) if 0.0 < result.phi < 1.0 else ())
 
 
 def curdled_blob(kept: int, generations: int, rng: np.random.Generator) -> np.ndarray:

@@ -13,6 +13,27 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..observables import backbone, disk_contacts, interacting, solid_fraction
+from .report import AnalysisReport, Clock
+
+LABELS = {
+    "phi": "Solid fraction Φ [dimensionless]",
+    "z": "Coordination number z: force-carrying disk–disk interactions per disk",
+    "z_star": "Backbone coordination z* = z / (1 − x_0) (Gilabert Eq. 13)",
+    "rattlers": "Rattlers: disks with no interaction above 10⁻⁴ F1",
+    "contacts": "Force-carrying disk–disk interactions",
+    "particles": "Disks N",
+    "coordination": "Local coordinations x_k: fraction of disks with k interactions",
+    "forces_known": "Contact forces known",
+    "force_unit": "Force unit of the histogram: F0, or ⟨N⟩ without cohesion [force]",
+    "normal_force_histogram": "Histogram of N / force unit (Gilabert Fig. 9)",
+    "theta_histogram": "Histogram of the angle θ between n and F (Gilabert Fig. 15) [degrees]",
+    "mean_normal_force": "Mean normal force F_N = ⟨N⟩ [force]",
+    "pressure": "Pressure P of the disk–disk stress [force/length]",
+    "rumpf_force": "F_N by Rumpf, π ⟨d²⟩/⟨d⟩ P / (zΦ) (Gilabert Eq. 17) [force]",
+    "rumpf_force_eq18": "F_N by Rumpf, 7πa P / (9 zΦ) (Gilabert Eq. 18) [force]",
+    "percolation_force": "Force-percolation threshold F_perc (Gilabert Sec. IV B) [force]",
+}
+"""The label of each value of the packing analysis (:func:`run`)."""
 
 RATTLER_FORCE_TOLERANCE = 1e-4
 """Interactions carrying less than this fraction of F1 = max(F0, P a) count as carrying no force
@@ -187,3 +208,11 @@ def percolation_force(state, force: np.ndarray, usable: np.ndarray) -> float | N
             if float((normals[joined] @ normals[joined].T).min()) < -0.99:
                 return float(force[row])
     return None
+
+
+def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
+    """The :class:`PackingStats` of ``state`` (Gilabert Secs. III–IV); ``load`` and ``seed`` are not used."""
+    stats = packing_stats(state)
+    clock.lap("packing")
+    return AnalysisReport("packing", stats.as_dict(), stats, reasons=stats.reasons,
+                          figures=("forces",) if stats.forces_known else ())

@@ -13,8 +13,28 @@ import numpy as np
 
 from ..errors import ParameterError
 from . import stiffness
+from .report import AnalysisReport, Clock
+from .states import require_forces
 from .stiffness import (NORMAL, ROLLING, TANGENTIAL, ZERO_TOLERANCE, Network, compatibility, count_below,
                         rattler_disks, relative_velocities, response, stiffness_matrix)
+
+LABELS = {
+    "contacts": stiffness.LABELS["contacts"],
+    "load": stiffness.LABELS["load"],
+    "critical_contacts": "Critical contacts M_c (on the Coulomb cone)",
+    "iterations": "Status flips by the principle of minimum sliding",
+    "agrees_with_dynamics": "The dynamics' statuses are the consistent state",
+    "dynamics_sliding": "Critical contacts sliding in the dynamics",
+    "solver_sliding": "Critical contacts sliding by minimum sliding",
+    "states_checked": "States enumerated, 2^M_c",
+    "consistent_states": "Consistent states of the critical contacts (named by their disks)",
+    "unstable_states": "Unstable states: Q(v, 𝕊) < 0 for some v (quasi-rigidity Eq. 41)",
+    "bijective": "Consistency map C is a bijection (quasi-rigidity Eq. 5)",
+    "enumeration_skipped": "Enumeration of the 2^M_c states",
+}
+"""The label of each value of the status analysis (:func:`run`)."""
+MAX_STATES_SHOWN = 4
+"""States a report names in words; the rest are counted."""
 
 
 def critical_contacts(net: Network, tolerance: float = 1e-6) -> np.ndarray:
@@ -189,3 +209,78 @@ def _enumerate_sparse(net: Network, load: np.ndarray, critical: np.ndarray, tole
         if scale > 0 and count_below(sym, -tolerance * scale) > 0:
             unstable.append(label)
     return StatusEnumeration(critical, 2 ** mc, consistent, unstable, len(images) == 2 ** mc)
+
+
+# ---------------------------------------------------------------------------------------- the analysis
+
+@dataclass(frozen=True)
+class StatusResult:
+    """What the status analysis found: the stiffness ``network`` (its ``sliding`` are the
+    dynamics' statuses), the consistent state by minimum sliding (``solution``), the critical
+    contacts named by their disks (``critical_names``, in the order of ``solution.critical``) and,
+    for few enough critical contacts, every state (``enumeration``, else None)."""
+
+    network: Network
+    solution: StatusSolution
+    critical_names: tuple[str, ...]
+    enumeration: StatusEnumeration | None
+
+
+def states_text(states: list[str], names: tuple[str, ...]) -> str:
+    """States of the critical contacts (bit strings, 1 = sliding, in the order of ``names``) in words:
+    "none", or "2 states: contacts 3–7, 5–wall 'top' sliding; none sliding"."""
+    if not states:
+        return "none"
+    described = [_state_text(bits, names) for bits in states[:MAX_STATES_SHOWN]]
+    more = f"; … {len(states) - MAX_STATES_SHOWN} more" if len(states) > MAX_STATES_SHOWN else ""
+    return f"{len(states)} state{'s' if len(states) > 1 else ''}: " + "; ".join(described) + more
+
+
+def _state_text(bits: str, names: tuple[str, ...]) -> str:
+    if not bits:
+        return "no critical contact"
+    sliding = [name for name, bit in zip(names, bits) if bit == "1"]
+    if not sliding:
+        return "none sliding"
+    return f"contact{'s' if len(sliding) > 1 else ''} {', '.join(sliding)} sliding"
+
+
+def _contact_names(state, net: Network, rows: np.ndarray) -> tuple[str, ...]:
+    """The contacts ``rows`` of ``net`` named by their disks, "3–7", or disk and wall, "5–wall 'top'"."""
+    return tuple(f"{net.first[a]}–{net.second[a]}" if net.second[a] >= 0
+                 else f"{net.first[a]}–wall '{state.wall_names[net.wall[a]]}'" for a in rows)
+
+
+def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
+    """The critical contacts, the consistent state by minimum sliding, compared with the dynamics'
+    statuses, and for M_c <= 16 all 2^M_c states (quasi-rigidity Sec. II); the result is a
+    :class:`StatusResult`."""
+    require_forces(state, "the contact-status analysis")
+    net = stiffness.network_with_contacts(state)
+    increment, kind = stiffness.load_increment(net, load, seed)
+    critical = critical_contacts(net)
+    clock.lap("critical_contacts")
+    solution = solve_status(net, increment, critical)
+    clock.lap("minimum_sliding")
+    values = {"contacts": net.contacts, "load": kind, "critical_contacts": int(len(critical)),
+              "iterations": solution.iterations, "agrees_with_dynamics": solution.agrees_with_dynamics,
+              "dynamics_sliding": int(np.count_nonzero(net.sliding[critical])),
+              "solver_sliding": int(np.count_nonzero(solution.sliding[critical])),
+              "states_checked": None, "consistent_states": None, "unstable_states": None, "bijective": None}
+    names = _contact_names(state, net, critical)
+    texts = {"load": stiffness.LOAD_TEXTS.get(kind, kind)}
+    limit = MAX_ENUMERATED if net.dof <= stiffness.DENSE_SIZE else MAX_ENUMERATED_SPARSE
+    reasons, enumeration = {}, None
+    if len(critical) <= limit:
+        enumeration = enumerate_states(net, increment, critical)
+        clock.lap("enumeration")
+        values.update(enumeration.as_dict())
+        texts.update((key, states_text(values[key], names)) for key in ("consistent_states", "unstable_states"))
+    else:
+        values["enumeration_skipped"] = (f"{len(critical)} critical contacts: all states are enumerated for at "
+                                         f"most {MAX_ENUMERATED} ({MAX_ENUMERATED_SPARSE} above "
+                                         f"{stiffness.DENSE_SIZE} velocity components)")
+        reasons = dict.fromkeys(("states_checked", "consistent_states", "unstable_states", "bijective"),
+                                "not enumerated: too many critical contacts")
+    return AnalysisReport("status", values, StatusResult(net, solution, names, enumeration), reasons=reasons,
+                          texts=texts, figures=("network",))

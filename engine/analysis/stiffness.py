@@ -46,10 +46,30 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .. import params
-from ..errors import ParameterError
+from ..errors import GranLabError, ParameterError
 from ..observables import interacting, sliding
 from ..state import STATUS_COHESIVE
+from . import LOADS
+from .report import AnalysisReport, Clock
+from .states import require_forces
 
+LABELS = {
+    "disks": "Disks N",
+    "dof": "Velocity components: 3 per disk, 1 per loaded wall or stress-controlled cell length (quasi-rigidity Eq. 15)",
+    "contacts": "Interactions M: contacts and distant cohesive pairs",
+    "sliding_contacts": "Contacts sliding in the dynamics",
+    "distant_interactions": "Distant cohesive interactions",
+    "nonzeros": "Non-zero entries of k = cKScᵀ",
+    "asymmetry": "Asymmetry of k, max|k − kᵀ| / max|k| [dimensionless]",
+    "load": "Load increment df_ext (quasi-rigidity Eq. 39)",
+    "null_modes": "Null modes of k (quasi-rigidity Sec. III E)",
+    "rigid_body_modes": "Null modes that are rigid-body motions",
+    "rattler_modes": "Null modes of rattlers (3 per disk without interaction)",
+    "unexcited_mechanisms": "Mechanisms the load does not excite",
+    "collapse": "Collapse: the load excites a mechanism (Eq. 39 has no solution)",
+    "unstable_directions": "Unstable directions, Q = vᵀkv < 0 (quasi-rigidity Eqs. 41–45)",
+}
+"""The label of each value of the stiffness analysis (:func:`run`)."""
 NORMAL, TANGENTIAL, ROLLING = 0, 1, 2
 ZERO_TOLERANCE = 1e-9
 """Eigenvalues below this fraction of the largest diagonal entry count as zero (null modes)."""
@@ -312,53 +332,6 @@ def null_space(matrix: sp.spmatrix, tolerance: float = ZERO_TOLERANCE, vectors: 
     return count, basis[:, np.argsort(values)]
 
 
-@dataclass(frozen=True)
-class Rigidity:
-    """Counts of Gilabert App. A for the rigidity matrix G (M × N_f): ``degrees_of_freedom`` N_f,
-    ``constraints`` M (relative motions that carry forces), ``floppy_modes`` K = dim null G,
-    ``hyperstaticity`` H = dim null Gᵀ (self-stress states), ``rank``; N_f + H = M + K holds when the
-    two null spaces were measured consistently (``balanced``)."""
-
-    degrees_of_freedom: int
-    constraints: int
-    floppy_modes: int
-    hyperstaticity: int
-    rank: int
-
-    @property
-    def balanced(self) -> bool:
-        return self.degrees_of_freedom + self.hyperstaticity == self.constraints + self.floppy_modes
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__, balanced=self.balanced)
-
-
-def rigidity_matrix(net: Network) -> sp.csr_matrix:
-    """G = cᵀ restricted to the relative motions that carry forces (Gilabert Eq. A3): normal
-    components of every interaction; tangential ones of touching contacts with friction; rolling
-    ones with a rolling spring. Without friction nor rolling resistance the rotations are left out
-    (N_f = 2N, Gilabert Eq. 22)."""
-    comps = components(net)
-    c = compatibility(net, comps).T.tocsr()
-    keep = np.ones((net.contacts, len(comps)), dtype=bool)
-    keep[:, 1:] = ~net.distant[:, None]
-    g = c[np.flatnonzero(keep.ravel())]
-    if comps == (NORMAL,):
-        translations = np.concatenate([np.flatnonzero((np.arange(3 * net.disks) % 3) != 2),
-                                       np.arange(3 * net.disks, net.dof)])
-        g = g[:, translations]
-    return g.tocsr()
-
-
-def rigidity(net: Network, tolerance: float = ZERO_TOLERANCE) -> Rigidity:
-    """K from the null space of GᵀG and H from that of GGᵀ, each by its own factorisation."""
-    g = rigidity_matrix(net)
-    m, nf = g.shape
-    floppy, _ = null_space((g.T @ g).tocsc(), tolerance, vectors=False)
-    stress, _ = null_space((g @ g.T).tocsc(), tolerance, vectors=False)
-    return Rigidity(nf, m, floppy, stress, nf - floppy)
-
-
 def _regularised_solve(matrix: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     """v with (matrix + delta I) v = rhs, delta 1e-10 of the largest diagonal entry: the solution
     of matrix v = rhs without components along its null modes (when rhs leaves them alone)."""
@@ -488,3 +461,99 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
             collapse_mode = modes @ (along / np.linalg.norm(along))
     return Mechanisms(zero + 3 * len(loose), rigid, 3 * len(loose), unexcited, collapse, unstable, modes,
                       collapse_mode)
+
+
+# ---------------------------------------------------------------------------------------- the analysis
+
+MODE_VECTORS = 400
+"""Null modes of k the stiffness analysis computes and classifies; more are only counted."""
+LOAD_TEXTS = {"walls": "the walls' loads raised in proportion",
+              "random": "random forces on the disks, adding up to zero (seeded)"}
+
+
+def unclassified(max_vectors: int) -> str:
+    """Why null modes are not classified when there are more than ``max_vectors``."""
+    return (f"more than {max_vectors} null modes besides the rattlers': their vectors are not computed, "
+            f"so they are not classified")
+
+
+def _load_on(net: Network, dof: np.ndarray) -> np.ndarray:
+    """The external load on the velocity components ``dof`` (-1: none), zero elsewhere."""
+    out = np.zeros(net.dof)
+    out[dof[dof >= 0]] = net.external[dof[dof >= 0]]
+    return out
+
+
+def load_increment(net: Network, load: str = "auto", seed: int = 0) -> tuple[np.ndarray, str]:
+    """The load increment df_ext (one value per velocity component) and the name of its kind.
+
+    ``walls`` raises every load on a force-controlled wall in proportion; ``cell`` raises the target
+    stress of each axis of a periodic cell under stress control in proportion (its lengths are then
+    bodies of k, Gilabert App. A); ``random`` pushes each disk with a random force (seeded);
+    ``auto`` takes ``walls`` when walls are loaded and ``random`` otherwise. The random forces act
+    on the disks with at least two interactions and add up to zero, so they excite neither
+    rattlers, nor a disk hanging by one contact (a mechanism of its own), nor a translation of the
+    whole. The principle of minimum sliding holds for any increment."""
+    if load not in LOADS:
+        raise ParameterError("load", load, f"one of {', '.join(LOADS)}")
+    walls = _load_on(net, net.wall_dof)
+    if load == "walls" or (load == "auto" and np.any(walls != 0.0)):
+        if not np.any(walls != 0.0):
+            raise GranLabError("load 'walls' needs a force-controlled wall with a load; this state has none "
+                               "(use load 'cell' for a cell under stress control, or 'random')")
+        return walls / np.linalg.norm(walls), "walls"
+    if load == "cell":
+        cell = _load_on(net, net.cell_dof)
+        if not np.any(cell != 0.0):
+            raise GranLabError("load 'cell' needs a periodic cell under stress control with a target stress; this "
+                               "state has none (use load 'walls' or 'random')")
+        return cell / np.linalg.norm(cell), "cell"
+    rng = np.random.default_rng(seed)
+    out = np.zeros(net.dof)
+    interactions = np.bincount(net.first, minlength=net.disks) + np.bincount(net.second[net.second >= 0],
+                                                                             minlength=net.disks)
+    bound = np.flatnonzero(interactions >= 2)
+    forces = rng.normal(size=(len(bound), 2))
+    forces -= forces.mean(axis=0)
+    out[3 * bound], out[3 * bound + 1] = forces[:, 0], forces[:, 1]
+    return out / np.linalg.norm(out), "random"
+
+
+def network_with_contacts(state) -> Network:
+    """The stiffness network of ``state``, which must have contacts."""
+    net = network(state)
+    if net.contacts == 0:
+        raise GranLabError("the state has no contacts: there is no stiffness matrix, status or rigidity to analyse")
+    return net
+
+
+def _drawn_mode(mech: Mechanisms) -> np.ndarray | None:
+    """The mode the lab draws as arrows: the one that collapses the packing, or else the first null mode."""
+    if mech.collapse_mode is not None:
+        return mech.collapse_mode
+    if mech.modes is not None and mech.modes.shape[1]:
+        return mech.modes[:, 0]
+    return None
+
+
+def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
+    """k = cKScᵀ with the dynamics' statuses, its null modes and their classification for a load
+    increment (quasi-rigidity Sec. III E); the result is the :class:`Mechanisms`."""
+    require_forces(state, "the stiffness analysis")
+    net = network_with_contacts(state)
+    k = stiffness_matrix(net)
+    clock.lap("stiffness_matrix")
+    increment, kind = load_increment(net, load, seed)
+    mech = mechanisms(net, increment, max_vectors=MODE_VECTORS)
+    clock.lap("mechanisms")
+    asymmetry = abs(k - k.T).max() / max(abs(k).max(), 1e-300)
+    values = {"disks": net.disks, "dof": net.dof, "contacts": net.contacts,
+              "sliding_contacts": int(np.count_nonzero(net.sliding)),
+              "distant_interactions": int(np.count_nonzero(net.distant)), "nonzeros": int(k.nnz),
+              "asymmetry": float(asymmetry), "load": kind, **mech.as_dict()}
+    reasons = {} if mech.modes is not None else dict.fromkeys(("rigid_body_modes", "unexcited_mechanisms", "collapse"),
+                                                              unclassified(MODE_VECTORS))
+    mode = _drawn_mode(mech)
+    moves_disks = mode is not None and bool(np.any(mode[:3 * net.disks].reshape(-1, 3)[:, :2] != 0.0))
+    return AnalysisReport("stiffness", values, mech, reasons=reasons, texts={"load": LOAD_TEXTS.get(kind, kind)},
+                          figures=("mechanism",) if moves_disks else ())

@@ -1,0 +1,93 @@
+"""The rigidity analysis: Gilabert's counts N_f + H = M + K of the rigidity matrix G (App. A),
+and whether the stiffness matrix k is positive definite apart from rigid motions and rattlers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .report import AnalysisReport, Clock
+from .stiffness import (NORMAL, ZERO_TOLERANCE, Network, compatibility, components, mechanisms,
+                        network_with_contacts, null_space, unclassified)
+
+LABELS = {
+    "degrees_of_freedom": "Degrees of freedom N_f: 3 per disk, 1 per loaded wall or stress-controlled cell length "
+                          "(Gilabert App. A)",
+    "constraints": "Constraints M: relative motions that carry forces",
+    "floppy_modes": "Floppy modes K = dim null G",
+    "hyperstaticity": "Degree of hyperstaticity H = dim null Gᵀ",
+    "rank": "Rank of the rigidity matrix G",
+    "balanced": "N_f + H = M + K holds (Gilabert Eq. 19)",
+    "stiffness_null_modes": "Null modes of k",
+    "stiffness_unstable_directions": "Unstable directions of k, Q < 0",
+    "stiffness_positive_definite": "k positive definite apart from rigid motions and rattlers",
+    "forces_known": "Contact forces known",
+}
+"""The label of each value of the rigidity analysis (:func:`run`)."""
+MODE_VECTORS = 40
+"""Null modes of k the rigidity analysis computes, only to tell rigid motions apart."""
+
+
+@dataclass(frozen=True)
+class Rigidity:
+    """Counts of Gilabert App. A for the rigidity matrix G (M × N_f): ``degrees_of_freedom`` N_f,
+    ``constraints`` M (relative motions that carry forces), ``floppy_modes`` K = dim null G,
+    ``hyperstaticity`` H = dim null Gᵀ (self-stress states), ``rank``; N_f + H = M + K holds when the
+    two null spaces were measured consistently (``balanced``)."""
+
+    degrees_of_freedom: int
+    constraints: int
+    floppy_modes: int
+    hyperstaticity: int
+    rank: int
+
+    @property
+    def balanced(self) -> bool:
+        return self.degrees_of_freedom + self.hyperstaticity == self.constraints + self.floppy_modes
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__, balanced=self.balanced)
+
+
+def rigidity_matrix(net: Network) -> sp.csr_matrix:
+    """G = cᵀ restricted to the relative motions that carry forces (Gilabert Eq. A3): normal
+    components of every interaction; tangential ones of touching contacts with friction; rolling
+    ones with a rolling spring. Without friction nor rolling resistance the rotations are left out
+    (N_f = 2N, Gilabert Eq. 22)."""
+    comps = components(net)
+    c = compatibility(net, comps).T.tocsr()
+    keep = np.ones((net.contacts, len(comps)), dtype=bool)
+    keep[:, 1:] = ~net.distant[:, None]
+    g = c[np.flatnonzero(keep.ravel())]
+    if comps == (NORMAL,):
+        translations = np.concatenate([np.flatnonzero((np.arange(3 * net.disks) % 3) != 2),
+                                       np.arange(3 * net.disks, net.dof)])
+        g = g[:, translations]
+    return g.tocsr()
+
+
+def rigidity(net: Network, tolerance: float = ZERO_TOLERANCE) -> Rigidity:
+    """K from the null space of GᵀG and H from that of GGᵀ, each by its own factorisation."""
+    g = rigidity_matrix(net)
+    m, nf = g.shape
+    floppy, _ = null_space((g.T @ g).tocsc(), tolerance, vectors=False)
+    stress, _ = null_space((g @ g.T).tocsc(), tolerance, vectors=False)
+    return Rigidity(nf, m, floppy, stress, nf - floppy)
+
+
+def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
+    """The counts of :func:`rigidity` and the inertia of k; the result is the :class:`Rigidity`.
+    Contacts found from the geometry will do: no force is needed."""
+    net = network_with_contacts(state)
+    counts = rigidity(net)
+    clock.lap("rigidity")
+    mech = mechanisms(net, np.zeros(net.dof), max_vectors=MODE_VECTORS)
+    clock.lap("stiffness_inertia")
+    internal = None if mech.rigid_body is None else mech.count - mech.rattlers - mech.rigid_body
+    values = {**counts.as_dict(), "stiffness_null_modes": mech.count, "stiffness_unstable_directions": mech.unstable,
+              "stiffness_positive_definite": None if internal is None else bool(internal == 0 and mech.unstable == 0),
+              "forces_known": state.forces_known}
+    reasons = {} if internal is not None else {"stiffness_positive_definite": unclassified(MODE_VECTORS)}
+    return AnalysisReport("rigidity", values, counts, reasons=reasons)

@@ -1,0 +1,137 @@
+"""A registry is the one place a new part is named: an analysis registered at run time, and a
+tangential model added to a copy of the source as its module and one registry line, are picked up
+by the command line (its choices, its text and ``--json``), the Python API and the lab."""
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import granlab
+from granlab.engine import cli
+from granlab.engine.analysis import ANALYSES, Analysis, register
+from granlab.engine.io.h5md import RunWriter
+
+from .conftest import periodic_gas
+from .test_lab_engine import wait
+
+LARGEST_DISK = '''
+"""A test's analysis: the largest disk."""
+from dataclasses import dataclass
+
+import numpy as np
+
+from granlab.engine.analysis.report import AnalysisReport
+
+LABELS = {"disks": "Disks N", "largest_radius": "Radius of the largest disk [length]"}
+
+
+@dataclass(frozen=True)
+class Largest:
+    index: int
+    radius: float
+
+
+def run(state, clock, load, seed):
+    index = int(np.argmax(state.radii))
+    clock.lap("largest")
+    return AnalysisReport("largest", {"disks": state.disks, "largest_radius": float(state.radii[index])},
+                          Largest(index, float(state.radii[index])))
+'''
+
+
+@pytest.fixture
+def largest(tmp_path, monkeypatch):
+    (tmp_path / "largest_disk.py").write_text(LARGEST_DISK)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    register(Analysis("largest", "largest_disk", "the largest disk"))
+    yield
+    del ANALYSES["largest"]
+
+
+def test_a_registered_analysis_reaches_the_command_line_its_json_the_api_and_the_lab(largest, tmp_path, capsys):
+    from granlab.app.analysis import summary
+    from granlab.app.engine_thread import LabEngine
+
+    sim = periodic_gas(count=30, length=12.0)
+    path = tmp_path / "gas.h5"
+    with RunWriter(path, sim) as writer:
+        writer.write_frame(sim)
+    biggest = float(sim.particles.radius.max())
+    assert "largest" in granlab.ANALYSES
+    report = granlab.analyze(granlab.read(str(path)), "largest")
+    assert report.result.radius == biggest and report.result.index == int(np.argmax(sim.particles.radius))
+
+    assert cli.main(["analyze", str(path), "largest"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.startswith("  Radius of the largest disk [length]:") and f"{biggest:.4g}" in line
+               for line in lines)
+    assert cli.main(["analyze", str(path), "largest", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["analysis"] == "largest" and result["largest_radius"] == biggest and result["disks"] == 30
+    assert set(result["timings_s"]) == {"largest", "total"}
+    with pytest.raises(SystemExit):
+        cli.main(["analyze", "--help"])
+    assert "largest: the largest disk" in " ".join(capsys.readouterr().out.split())
+
+    lab = LabEngine(tmp_path / "lab", preset="ratchet16", speed=math.inf)
+    lab.start()
+    try:
+        wait(lambda: lab.status()["step"] > 0)
+        lab.submit("analyze", kind="largest")
+        found = wait(lambda: lab.analysis.latest() if lab.analysis.latest().seq == 1 else None)
+    finally:
+        lab.stop()
+    assert found.error == "" and found.report.values["disks"] == 16
+    assert "Radius of the largest disk [length]" in summary(found)
+
+
+ONE_MORE_MODEL = ('    TangentialModel("twin", 4, "Cundall–Strack\'s twin (a test\'s)", "twin", False, True),\n')
+
+
+def test_a_tangential_model_is_one_module_and_one_registry_line(tmp_path):
+    """A copy of the installed source with one more model (its kernels a copy of Cundall–Strack's
+    module, its line in ``params.TANGENTIAL``): the contact loop's list of models, the contact law,
+    the lab's settings, its menu and legend colours, and the command line's choices take it."""
+    import granlab.app
+    import granlab.engine
+
+    root = tmp_path / "granlab"
+    app = Path(granlab.app.__file__).parent
+    for name, source in (("", Path(granlab.__file__).parent), ("engine", Path(granlab.engine.__file__).parent),
+                         ("app", app), ("static", app.parent / "static")):
+        shutil.copytree(source, root / name, dirs_exist_ok=True, ignore=shutil.ignore_patterns("__pycache__"))
+    kernels = root / "engine" / "kernels" / "tangential"
+    shutil.copy(kernels / "cundall_strack.py", kernels / "twin.py")
+    params = root / "engine" / "params.py"
+    text = params.read_text()
+    opening = "TANGENTIAL = {model.name: model for model in (\n"
+    assert opening in text
+    params.write_text(text.replace(opening, opening + ONE_MORE_MODEL))
+    script = textwrap.dedent(f"""
+        import granlab.engine
+        assert granlab.engine.__file__.startswith({str(root)!r}), granlab.engine.__file__
+        from granlab.engine import ContactLaw
+        from granlab.engine.kernels.tangential import CODES
+        from granlab.engine.params import TANGENTIAL_MODELS
+        from granlab.engine.protocols.settings import LabSettings
+        from granlab.app import dashboard
+        from granlab.app.plots import MODEL_STYLES
+        assert "twin" in TANGENTIAL_MODELS and CODES[-1] == 4
+        assert ContactLaw(tangential_model="twin").tangential_model == "twin"
+        assert LabSettings(tangential_model="twin").tangential_model == "twin"
+        assert "twin" in dashboard.TANGENTIAL_MODELS and len(set(MODEL_STYLES.values())) == len(TANGENTIAL_MODELS)
+    """)
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    subprocess.run([sys.executable, "-c", script], env=env, check=True, cwd=tmp_path, timeout=300)
+    for command in (["experiment"], ["bench"], ["study", "ratchet"]):
+        help_text = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *command, "--help"], env=env,
+                                   cwd=tmp_path, capture_output=True, text=True, check=True, timeout=300).stdout
+        assert "twin" in help_text.split("--model")[1], command
