@@ -1,5 +1,5 @@
 """The ``granlab`` command: the engine's commands (:mod:`granlab.engine.cli`), ``serve`` (the lab),
-``render`` (pictures and movies of a run file, :mod:`granlab.app.render`), ``export`` (run files for
+``render`` (pictures and movies of a run file, :mod:`granlab.app.media.render`), ``export`` (run files for
 ParaView, OVITO and MDAnalysis, :mod:`granlab.engine.io.export`) and ``bench --lab`` (the lab's benchmark)."""
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def build_parser():
 
 
 def _render(args) -> dict:
-    from .render import render_run
+    from .media.render import render_run
 
     return render_run(args.runfile, args.out, args.frames, args.size, args.color, not args.no_forces, args.fps,
                       args.force, progress=_FrameProgress("rendering"))
@@ -90,7 +90,7 @@ class _FrameProgress:
 
 
 def _print_render(result: dict) -> None:
-    from .render import print_summary
+    from .media.render import print_summary
 
     print_summary(result)
 
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "serve":
-            from .server import serve
+            from .lab.server import serve
 
             changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
             if args.history_mib is not None:

@@ -20,8 +20,8 @@ from granlab.engine.analysis.report import AnalysisReport
 from granlab.engine.analysis.states import PackingState
 from granlab.engine.studies import RatchetCurve
 
-from .analysis import AnalysisResult
-from .plots import MODEL_STYLES, AnalysisFigures, compact, lab_figure, legend_beside
+from .lab.analysis import AnalysisResult
+from .lab.plots import MODEL_STYLES, AnalysisFigures, compact, lab_figure, legend_beside
 
 _shown_inline = False
 
@@ -120,7 +120,7 @@ class NotebookLab:
             raise self._failure
 
     def _serve(self, preset: str, data_dir, port: int, changes: dict) -> None:
-        from .server import Lab
+        from .lab.server import Lab
 
         asyncio.set_event_loop(asyncio.new_event_loop())  # the panel server's loop, apart from the kernel's
         try:

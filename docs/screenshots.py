@@ -20,8 +20,8 @@ from pathlib import Path
 from PIL import Image
 from playwright.sync_api import sync_playwright
 
-from granlab.app.dashboard import SPEEDS
-from granlab.app.server import read_status, spawn
+from granlab.app.lab.dashboard import SPEEDS
+from granlab.app.lab.server import read_status, spawn
 from granlab.engine.protocols.presets import PRESETS
 
 READY = {

@@ -84,7 +84,7 @@ def export(run_file, format: str, out, frames=None, force: bool = False) -> dict
 def render(run_file, out, frames=None, size: str = "1280x720", color: str = "rotation", forces: bool = True,
            fps: float = 10.0, force: bool = False) -> dict:
     """Pictures or a movie of a run file (``.png``, ``.gif``, ``.mp4``), as ``granlab render``."""
-    from granlab.app.render import render_run
+    from granlab.app.media.render import render_run
 
     return render_run(run_file, out, frames, size, color, forces, fps, force)
 

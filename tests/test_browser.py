@@ -20,8 +20,8 @@ from urllib.parse import parse_qs, urlparse
 import pytest
 from playwright.sync_api import expect
 
-from granlab.app.bench import resident_mib
-from granlab.app.server import TRIM_DELAY, endpoint, read_status, spawn
+from granlab.app.lab.bench import resident_mib
+from granlab.app.lab.server import TRIM_DELAY, endpoint, read_status, spawn
 from granlab.engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -119,7 +119,7 @@ def choose_preset(page, lab, name: str):
 
 def set_speed(page, lab, label: str):
     """Press the speed slider's keys until it shows ``label`` (a value of app.dashboard.SPEEDS)."""
-    from granlab.app.dashboard import SPEEDS
+    from granlab.app.lab.dashboard import SPEEDS
 
     handle = page.locator(".speed-slider .noUi-handle")
     handle.focus()
@@ -598,7 +598,7 @@ def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_li
     protocol, any log line writes the tokens as '…'."""
     from bokeh.protocol.exceptions import ProtocolError
 
-    from granlab.app.server import mask_tokens_in_logs
+    from granlab.app.lab.server import mask_tokens_in_logs
 
     factory = logging.getLogRecordFactory()
     try:

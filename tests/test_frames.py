@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from granlab.app.drawing import LABEL_SIZE, frame_bounds
+from granlab.app.media.drawing import LABEL_SIZE, frame_bounds
 from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.state import STATUS_COHESIVE, STATUS_NONE, STATUS_SLIDE_NEG, STATUS_STICK
 

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from granlab.app.jobs import Jobs
+from granlab.app.lab.jobs import Jobs
 from granlab.engine.errors import GranLabError
 
 

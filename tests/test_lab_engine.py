@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granlab.app.buffers import Cursor, SeriesBuffer
-from granlab.app.engine_thread import LabEngine, safe_path
+from granlab.app.lab.buffers import Cursor, SeriesBuffer
+from granlab.app.lab.engine_thread import LabEngine, safe_path
 from granlab.engine import ParameterError
 from granlab.engine.params import Load
 from granlab.engine.io import h5md
@@ -349,7 +349,7 @@ def test_an_analysis_runs_on_its_own_thread_on_the_state_of_that_moment(engine):
     """The status analysis of the running box: the engine keeps stepping while it runs, the
     result is the analysis of the state taken when the command arrived, and the plot data
     follow from it (one segment per contact, a marker per critical contact)."""
-    from granlab.app.analysis import mechanism_arrows, network_segments
+    from granlab.app.lab.analysis import mechanism_arrows, network_segments
     from granlab.engine.analysis.report import analyze
 
     wait(lambda: engine.status()["stage"] == "cycling")  # compressed: the disks touch

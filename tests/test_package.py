@@ -10,7 +10,7 @@ from pathlib import Path
 
 import granlab
 import granlab.api
-from granlab.app.server import endpoint, spawn
+from granlab.app.lab.server import endpoint, spawn
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("panel", "bokeh", "matplotlib", "viser", "tornado")
@@ -94,7 +94,7 @@ def test_the_wheel_installed_in_a_clean_environment_runs_serves_exports_and_anal
     assert (work / "gas.xyz").read_text().count("Lattice=") == 5
     packing = json.loads(granlab_cli("analyze", "gas.h5", "packing", "--json").stdout)
     assert packing["analysis"] == "packing" and packing["particles"] == 30
-    teaching = subprocess.run([bin_dir / "python", "-c", "from granlab.app.dashboard import STATIC, teaching_text\n"
+    teaching = subprocess.run([bin_dir / "python", "-c", "from granlab.app.lab.dashboard import STATIC, teaching_text\n"
                                "print(STATIC.resolve(), teaching_text('ratchet16'), sep='\\n')"],
                               capture_output=True, text=True, cwd=work, env=env, check=True).stdout
     static, text = teaching.split("\n", 1)

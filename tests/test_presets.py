@@ -290,7 +290,7 @@ def test_every_preset_is_a_module_of_the_package_with_its_teaching_text():
     ``static/teaching/`` and one entry of the registry."""
     from pathlib import Path
 
-    from granlab.app.dashboard import STATIC, teaching_text
+    from granlab.app.lab.dashboard import STATIC, teaching_text
     from granlab.engine.protocols import presets
 
     folder = Path(presets.__file__).parent

@@ -57,8 +57,8 @@ def largest(tmp_path, monkeypatch):
 
 
 def test_a_registered_analysis_reaches_the_command_line_its_json_the_api_and_the_lab(largest, tmp_path, capsys):
-    from granlab.app.analysis import summary
-    from granlab.app.engine_thread import LabEngine
+    from granlab.app.lab.analysis import summary
+    from granlab.app.lab.engine_thread import LabEngine
 
     sim = periodic_gas(count=30, length=12.0)
     path = tmp_path / "gas.h5"
@@ -122,8 +122,8 @@ def test_a_tangential_model_is_one_module_and_one_registry_line(tmp_path):
         from granlab.engine.kernels.tangential import CODES
         from granlab.engine.params import TANGENTIAL_MODELS
         from granlab.engine.protocols.settings import LabSettings
-        from granlab.app import dashboard
-        from granlab.app.plots import MODEL_STYLES
+        from granlab.app.lab import dashboard
+        from granlab.app.lab.plots import MODEL_STYLES
         assert "twin" in TANGENTIAL_MODELS and CODES[-1] == 4
         assert ContactLaw(tangential_model="twin").tangential_model == "twin"
         assert LabSettings(tangential_model="twin").tangential_model == "twin"

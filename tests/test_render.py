@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from granlab.app.cli import main
-from granlab.app.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
+from granlab.app.media.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
                                  WATCHED_COLORS, disk_colors)
-from granlab.app.render import default_movie_frames, render_image, run_frames, write_movie
+from granlab.app.media.render import default_movie_frames, render_image, run_frames, write_movie
 from granlab.engine.frames import SceneFrame
 from granlab.engine.io import h5md
 from granlab.engine.io.scene import parse_scene

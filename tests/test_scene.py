@@ -14,9 +14,9 @@ import viser
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-import granlab.app.drawing as drawing
-import granlab.app.scene as scene
-from granlab.app.drawing import (
+import granlab.app.media.drawing as drawing
+import granlab.app.lab.scene as scene
+from granlab.app.media.drawing import (
                                  COLOR_FIELDS,
                                  COORDINATION_COLORS,
                                  FORCE_CLASSES,
@@ -27,7 +27,7 @@ from granlab.app.drawing import (
                                  force_class_thickness,
                                  force_classes,
                                  )
-from granlab.app.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
+from granlab.app.lab.scene import SceneView, pick_disk, srgb_to_linear, unit_cylinder
 from granlab.engine.frames import SceneFrame
 
 

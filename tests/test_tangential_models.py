@@ -73,8 +73,8 @@ def test_every_model_takes_energy_out_of_random_oblique_impacts_never_puts_it_in
 
 def test_any_number_of_models_gets_a_colour_and_a_line_of_its_own():
     """A fifth, seventh or seventieth registered model is drawn in a style no other model has (the
-    colours were zipped with six, and a seventh model stopped ``import granlab.app.plots``)."""
-    from granlab.app.plots import LINES, MODEL_STYLES, model_styles
+    colours were zipped with six, and a seventh model stopped ``import granlab.app.lab.plots``)."""
+    from granlab.app.lab.plots import LINES, MODEL_STYLES, model_styles
 
     styles = model_styles([f"model-{i}" for i in range(70)])
     assert len(set(styles.values())) == 70

@@ -1,4 +1,4 @@
-"""Files of the lab's data folder, read and written beside the simulation (:mod:`granlab.app.jobs`).
+"""Files of the lab's data folder, read and written beside the simulation (:mod:`granlab.app.lab.jobs`).
 
 :class:`Replay` plays a file back on a timeline. :func:`read_replay`, :func:`write_run` and
 :func:`write_lab_movie` are the functions the lab's file jobs run in a process of their own: each
@@ -232,7 +232,7 @@ def write_lab_movie(report, path: Path, frames: list, color: str, watched: list,
     """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
     the ``watched`` pairs drawn in their colours and named by ``labels`` in the legend, the
     ``groups`` of disks named under them (:func:`granlab.engine.frames.group_labels`)."""
-    from .render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
+    from ..media.render import union_bounds, write_movie  # matplotlib takes a second to load: only when a movie is made
 
     scenes = [(build_frame([(data, (0.0, 0.0))], [watched], groups), caption) for data, caption in frames]
     bounds = union_bounds(scene for scene, _ in scenes)

@@ -27,7 +27,7 @@ from granlab.engine.params import TANGENTIAL
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 from . import analysis
-from .drawing import STATUS_LEGEND, WATCHED_COLORS, hex_color
+from ..media.drawing import STATUS_LEGEND, WATCHED_COLORS, hex_color
 
 TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 LINE_ROLLOVER = 40000
@@ -561,7 +561,7 @@ class AnalysisFigures:
         self.figures = {"network": network, "forces": forces, "structure": structure}
 
     def show(self, result) -> tuple[str, ...]:
-        """Feed the figures from ``result`` (an :class:`granlab.app.analysis.AnalysisResult`); the names of
+        """Feed the figures from ``result`` (an :class:`granlab.app.lab.analysis.AnalysisResult`); the names of
         the figures its report has (:data:`granlab.engine.analysis.report.FIGURES`)."""
         figures = tuple(result.report.figures) if result.report is not None else ()
         src = self.sources

@@ -1,5 +1,5 @@
-"""The colours of a picture of the lab, shared by the live 3D scene (:mod:`granlab.app.scene`), the
-movies of ``granlab render`` (:mod:`granlab.app.render`) and the legends.
+"""The colours of a picture of the lab, shared by the live 3D scene (:mod:`granlab.app.lab.scene`), the
+movies of ``granlab render`` (:mod:`granlab.app.media.render`) and the legends.
 
 A picture is a :class:`granlab.engine.frames.SceneFrame` (its geometry, in the engine so that the
 headless export writes the same fields); here are its colour fields, palettes, line classes,

@@ -2,9 +2,9 @@
 
 A picture shows the disks (filled circles, true size) in the colours of one colour field, a
 spoke per disk from its centre to its rim at its rotation angle θ, the force network (segments
-whose width grows with |F| in the classes of :func:`granlab.app.drawing.force_classes`, coloured by
+whose width grows with |F| in the classes of :func:`granlab.app.media.drawing.force_classes`, coloured by
 contact kind), the walls or the periodic cell, and a legend with a caption. Colours are the lab
-scene's (:mod:`granlab.app.drawing`).
+scene's (:mod:`granlab.app.media.drawing`).
 
 Everything is drawn on a :class:`matplotlib.figure.Figure` of its own with the Agg canvas (no
 pyplot, no global state), so pictures may be rendered from a background thread. Errors name
@@ -191,7 +191,7 @@ def _walls_cut_at_corners(frame: SceneFrame) -> SceneFrame:
 
 
 def union_bounds(frames: Iterable[SceneFrame]) -> tuple[float, float, float, float]:
-    """(xmin, xmax, ymin, ymax) covering every frame (:func:`granlab.app.drawing.frame_bounds`, walls
+    """(xmin, xmax, ymin, ymax) covering every frame (:func:`granlab.app.media.drawing.frame_bounds`, walls
     cut at the corners of the box they form)."""
     boxes = np.array([frame_bounds(_walls_cut_at_corners(frame)) for frame in frames]).reshape(-1, 4)
     if len(boxes) == 0:
@@ -492,11 +492,11 @@ def render_image(frame: SceneFrame, size=(1280, 720), color_field: str = "rotati
                  watched_labels: Sequence[str] = ()) -> np.ndarray:
     """The picture of ``frame``: (H, W, 3) uint8 RGB for ``size`` = (W, H) pixels.
 
-    ``color_field`` is one of :data:`granlab.app.drawing.COLOR_FIELDS`; ``forces`` draws the force
+    ``color_field`` is one of :data:`granlab.app.media.drawing.COLOR_FIELDS`; ``forces`` draws the force
     network; ``caption`` is written above the legend (its first line in bold); the frame's
     watched contacts are named in the legend by ``watched_labels`` (in the order of the watch
     list: the k-th in the k-th colour); ``bounds`` (xmin, xmax, ymin, ymax, in
-    lengths) is the region shown (default :func:`granlab.app.drawing.frame_bounds` of the frame; a movie
+    lengths) is the region shown (default :func:`granlab.app.media.drawing.frame_bounds` of the frame; a movie
     passes the union over its frames so the packing stays put).
     """
     size = check_size(size)

@@ -29,17 +29,17 @@ from granlab.engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis
 from .buffers import Cursor
-from .drawing import COLOR_FIELDS, legend_html
+from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
 
-STATIC = Path(__file__).resolve().parent.parent / "static"
+STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
 JOB_KINDS = ("save", "load", "record")
-"""The file jobs, each shown beside its button while it runs (:mod:`granlab.app.jobs`)."""
+"""The file jobs, each shown beside its button while it runs (:mod:`granlab.app.lab.jobs`)."""
 PANES = ("Key plots", "More plots", "About this preset", "Analysis")
 HEADER_HEIGHT = 58
 HEADER_NOTES = ("preset", "run", "speed")

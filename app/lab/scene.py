@@ -41,7 +41,7 @@ from websockets.http11 import Request
 
 from granlab.engine.frames import SceneFrame, cell_outline
 
-from .drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR, PALETTES, SPOKE_COLOR,
+from ..media.drawing import (CELL_COLOR, COLOR_FIELDS, CONTACT_KINDS, FORCE_CLASSES, MECHANISM_COLOR, PALETTES, SPOKE_COLOR,
                       WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_class_thickness, force_classes,
                       frame_bounds)
 
@@ -89,7 +89,7 @@ def srgb_to_linear(colors: np.ndarray) -> np.ndarray:
 _WIRE_TABLES = {field: srgb_to_linear(table) for field, table in PALETTES.items()}
 _WIRE_TABLES["contact kind"] = srgb_to_linear(np.array([color for _, color in CONTACT_KINDS]))
 _WIRE_TABLES["watched"] = srgb_to_linear(WATCHED_COLORS)
-"""The palettes of :mod:`granlab.app.drawing` as sent to viser (linear values)."""
+"""The palettes of :mod:`granlab.app.media.drawing` as sent to viser (linear values)."""
 
 
 def unit_cylinder(segments: int = DISK_SEGMENTS) -> tuple[np.ndarray, np.ndarray]:

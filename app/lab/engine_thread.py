@@ -33,7 +33,7 @@ import numpy as np
 from granlab.engine.analysis import ANALYSES
 from granlab.engine.analysis.states import PackingState
 from granlab.engine.errors import DivergenceError, GranLabError, ParameterError
-from granlab.engine.frames import FrameData, build_frame
+from granlab.engine.frames import FrameData, SceneFrame, build_frame
 from granlab.engine.io.jsonsafe import jsonable
 from granlab.engine.io.outputs import free_name, occupied
 from granlab.engine.params import positive
@@ -42,7 +42,7 @@ from granlab.engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, La
 
 from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
-from .drawing import COLOR_FIELDS, SceneFrame, frame_caption
+from ..media.drawing import COLOR_FIELDS, frame_caption
 from .jobs import JobOutcome, Jobs
 from .replay import Replay, read_replay, read_time_limit, write_lab_movie, write_run
 
