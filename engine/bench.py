@@ -172,10 +172,9 @@ def profile(side: int = 100, steps: int = 1000) -> dict:
         p, w, cell, ct, ws = (sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(),
                               sim.workspace)
         repeats = max(1, steps // 10)
-        contact_pass = _best_seconds(lambda: contacts.contact_forces(
-            p, w, cell, ct, sim._law_vector, sim.normal_model_code, sim.tangential_model_code, sim.dt,
-            sim.integration.max_overlap,
-            False, 1, ws.force_buffer, ws.wall_buffer, ws.tally_buffer), repeats)
+        run = sim.run_options(sim.dt, 1)
+        contact_pass = _best_seconds(lambda: contacts.contact_forces(p, w, cell, ct, ws, sim._law_vector, run, False),
+                                     repeats)
         particle_pass = _best_seconds(lambda: integrate.particle_pass(
             p, ws.force_buffer, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
             ws.partial_gather, ws.gather), repeats)

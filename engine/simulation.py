@@ -416,12 +416,16 @@ class Simulation:
         p = self.particles
         return bool(p.external_force.any() or p.external_torque.any())
 
+    def run_options(self, dt: float, n_steps: int) -> RunOptions:
+        """What the kernels take for ``n_steps`` steps of ``dt`` from the current state."""
+        return RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
+                          self._time_origin, self.step - self._step_origin, n_steps, self.skin,
+                          self.integration.max_overlap, self.threads())
+
     def _advance(self, dt: float, n_steps: int) -> tuple[int, int]:
         """One call of the kernel driver, growing the contact table until it fits."""
         while True:
-            run = RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
-                             self._time_origin, self.step - self._step_origin, n_steps, self.skin,
-                             self.integration.max_overlap, self.threads())
+            run = self.run_options(dt, n_steps)
             done, code = k_integrate.advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
                                              self.contacts.arrays(), self._spare.arrays(), self.workspace,
                                              self._law_vector, run)

@@ -22,6 +22,7 @@ On sliding, both anchors move by half the slip, so the rolling distance of Eq. 2
 """
 
 import math
+from collections import namedtuple
 
 from numba import literal_unroll, literally, njit, prange, uint64
 
@@ -37,6 +38,10 @@ TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
 TALLY_VXX, TALLY_VXY, TALLY_VYX, TALLY_VYY = 4, 5, 6, 7
 TALLY_OVERLAPPING, TALLY_MAX_OVERLAP, TALLY_OPENING = 8, 9, 10
 TALLY_SIZE = 11
+
+Laws = namedtuple("Laws", "kn kt mu gamma_t f0 d0 kr mu_r gamma_r_factor eta_factor")
+"""The contact law's scalars as the loop reads them (:func:`chunk_laws`); the dashpots' factors
+are multiplied by the root of a row's reduced mass (normal) or inertia (rolling)."""
 
 
 @njit(**KERNEL)
@@ -118,12 +123,53 @@ def opened_dashpot_share(gap, vn, dt):
 
 
 @njit(**KERNEL)
-def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, n_chunks,
-                   force_buffer, wall_buffer, tally_buffer):
-    """Contact forces of every row of ``ct``, accumulated into ``n_chunks`` chunk buffers.
+def chunk_laws(law):
+    """The :data:`Laws` of the law array ``law`` (its slots: :mod:`granlab.engine.kernels.laws`)."""
+    return Laws(law[KN], law[KT], law[MU], law[GAMMA_T], law[F0], law[D0], law[KR], law[MU_R],
+                2.0 * law[ZETA_R] * math.sqrt(law[KR]), 2.0 * law[ZETA] * math.sqrt(law[KN]))
 
-    ``force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
-    (the particle pass zeroes it); ``wall_buffer (T, nw)`` and ``tally_buffer (T, TALLY_SIZE)``
+
+@njit(**KERNEL)
+def anchor(ct, k, angle, i, j, nx, ny, is_wall, xi, yi, wall_shift):
+    """A fresh contact: the body-frame angles of the material points that touch (ratcheting
+    Eq. 21; along a wall, the point's position along it) and springs at zero."""
+    phi = math.atan2(ny, nx)
+    ct.anchor_angle_i[k] = phi + math.pi - angle[i]
+    if is_wall:
+        ct.anchor_angle_j[k] = -ny * xi + nx * yi - wall_shift
+    else:
+        ct.anchor_angle_j[k] = phi - angle[j]
+    ct.tangential_spring[k] = 0.0
+    ct.rolling_spring[k] = 0.0
+
+
+@njit(**KERNEL)
+def separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening):
+    """The laws of a row whose disks do not overlap: what its normal dashpot did in this step's
+    window before it opened, its history forgotten, the cohesive pull within ``D0``. Returns
+    ``F_n`` and the tallies ``damping`` and ``opening`` with this row's shares added; the row
+    acts when ``F_n != 0`` or it is cohesive."""
+    fn = 0.0
+    if whole_step and touching(ct.status[k]):
+        share = opened_dashpot_share(gap, vn_d, dt)
+        fn = -share * eta * vn_d
+        damping += share * eta * vn_d * vn_d * dt
+    opening += forget(k, ct.status, ct.tangential_spring, ct.rolling_spring, ct.normal_force, ct.tangential_force,
+                      laws.kt, laws.kr)
+    if laws.f0 > 0.0 and gap < laws.d0:
+        fn += cohesion_force(laws.f0, laws.d0, gap)
+        ct.status[k] = STATUS_COHESIVE
+    return fn, damping, opening
+
+
+@njit(**KERNEL)
+def contact_forces(p, w, cell, ct, ws, law, run, store):
+    """Contact forces of every row of ``ct``, accumulated into ``run.n_chunks`` chunk buffers of
+    the workspace ``ws``, with the models, step and overlap limit of ``run``
+    (:class:`granlab.engine.state.RunOptions`).
+
+    ``ws.force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
+    (the particle pass zeroes it); ``ws.wall_buffer (T, nw)`` and ``ws.tally_buffer (T, TALLY_SIZE)``
     are overwritten. The ``TALLY_V..`` slots get the virial corrections of wall and image rows.
     History (springs, anchors, status) is updated every call; the results ``normal_force``,
     ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run).
@@ -134,42 +180,32 @@ def contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, over
     of them with this kernel: the model is chosen here, once per step, not per row.
     """
     for code in literal_unroll(TANGENTIAL_CODES):
-        if tangential_model == code:
-            if n_chunks == 1:
-                contact_chunk(p, w, cell, ct, law, normal_model, code, dt, overlap_limit, store, 0, 1,
-                              force_buffer, wall_buffer, tally_buffer)
+        if run.tangential_model == code:
+            if run.n_chunks == 1:
+                contact_chunk(p, w, cell, ct, ws, law, run, code, store, 0)
             else:
-                _contact_chunks_parallel(p, w, cell, ct, law, normal_model, code, dt, overlap_limit, store,
-                                         n_chunks, force_buffer, wall_buffer, tally_buffer)
+                _contact_chunks_parallel(p, w, cell, ct, ws, law, run, code, store)
 
 
 @njit(**PARALLEL)
-def _contact_chunks_parallel(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store,
-                             n_chunks, force_buffer, wall_buffer, tally_buffer):
+def _contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, store):
     literally(tangential_model)
-    for c in prange(n_chunks):
-        contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
-                      force_buffer, wall_buffer, tally_buffer)
+    for c in prange(run.n_chunks):
+        contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c)
 
 
 @njit(**KERNEL)
-def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overlap_limit, store, c, n_chunks,
-                  force_buffer, wall_buffer, tally_buffer):
+def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``, with the laws
-    of tangential model ``tangential_model`` (a compile-time code)."""
+    of tangential model ``tangential_model`` (a compile-time code, ``run.tangential_model``)."""
     literally(tangential_model)
+    normal_model, dt, overlap_limit, n_chunks = run.normal_model, run.dt, run.max_overlap, run.n_chunks
+    force_buffer, wall_buffer, tally_buffer = ws.force_buffer, ws.wall_buffer, ws.tally_buffer
     position = p.position
     velocity = p.velocity
     angle = p.angle
     omega = p.omega
-    predicted = p.predicted_motion
     radius = p.radius
-    inv_inertia = p.inv_inertia
-    wall_normal = w.normal
-    wall_offset = w.offset
-    wall_velocity = w.velocity
-    wall_tangential_velocity = w.tangential_velocity
-    wall_tangential_position = w.tangential_position
     length_x = cell.length[0]
     length_y = cell.length[1]
     strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
@@ -177,49 +213,24 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
     particle_i = ct.particle_i
     particle_j = ct.particle_j
     image = ct.image
-    root_reduced_mass = ct.root_reduced_mass
-    tangential_spring = ct.tangential_spring
-    anchor_i = ct.anchor_angle_i
-    anchor_j = ct.anchor_angle_j
-    rolling_spring = ct.rolling_spring
     status = ct.status
-    normal_force = ct.normal_force
-    tangential_force = ct.tangential_force
     surface_gap = ct.surface_gap
     count = ct.count[0]
     n = uint64(position.shape[0])
-    kn = law[KN]
-    kt = law[KT]
-    mu = law[MU]
-    gamma_t = law[GAMMA_T]
-    f0 = law[F0]
-    d0 = law[D0]
-    kr = law[KR]
-    mu_r = law[MU_R]
-    gamma_r_factor = 2.0 * law[ZETA_R] * math.sqrt(kr)
-    eta_factor = 2.0 * law[ZETA] * math.sqrt(kn)
-    nw = wall_offset.shape[0]
+    laws = chunk_laws(law)
+    d0 = laws.d0
     # without a dashpot the dashpots' velocities multiply zero: the half-step ones serve, unread
     whole_step = tangential.whole_step_dashpots(tangential_model) and (
-        eta_factor > 0.0 or gamma_t > 0.0 or gamma_r_factor > 0.0)
-    # LAMMPS's model (the only one with half-step dashpots) puts its dashpot inside the Coulomb limit
-    dashpot_in_limit = not tangential.whole_step_dashpots(tangential_model)
+        laws.eta_factor > 0.0 or laws.gamma_t > 0.0 or laws.gamma_r_factor > 0.0)
 
     lo = uint64(c * count // n_chunks)
     hi = uint64((c + 1) * count // n_chunks)
-    for m in range(nw):
+    for m in range(w.offset.shape[0]):
         wall_buffer[c, m] = 0.0
-    damping = 0.0
-    sliding = 0.0
-    rolling_loss = 0.0
-    wall_work = 0.0
-    vxx = 0.0
-    vxy = 0.0
-    vyx = 0.0
-    vyy = 0.0
+    damping = sliding = rolling_loss = wall_work = opening = 0.0
+    vxx = vxy = vyx = vyy = 0.0  # virial corrections
     overlapping = 0
     max_overlap = 0.0
-    opening = 0.0
     for k in range(lo, hi):
         i = uint64(particle_i[k])
         j = uint64(particle_j[k])
@@ -235,8 +246,8 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             reach = ri + rj + d0
             if r2 >= reach * reach and not touching(status[k]):
                 if status[k] != STATUS_NONE:
-                    opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
-                                      tangential_force, kt, kr)
+                    opening += forget(k, status, ct.tangential_spring, ct.rolling_spring, ct.normal_force,
+                                      ct.tangential_force, laws.kt, laws.kr)
                 if store:
                     surface_gap[k] = math.sqrt(r2) - ri - rj
                 continue
@@ -255,41 +266,41 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
         else:
             wall = j - n
             rj = 0.0
-            nx = wall_normal[wall, 0]
-            ny = wall_normal[wall, 1]
-            dist = nx * position[i, 0] + ny * position[i, 1] - wall_offset[wall]
+            nx = w.normal[wall, 0]
+            ny = w.normal[wall, 1]
+            dist = nx * position[i, 0] + ny * position[i, 1] - w.offset[wall]
             gap = dist - ri
             if gap >= d0 and not touching(status[k]):
                 if status[k] != STATUS_NONE:
-                    opening += forget(k, status, tangential_spring, rolling_spring, normal_force,
-                                      tangential_force, kt, kr)
+                    opening += forget(k, status, ct.tangential_spring, ct.rolling_spring, ct.normal_force,
+                                      ct.tangential_force, laws.kt, laws.kr)
                 if store:
                     surface_gap[k] = gap
                 continue
             rx = dist * nx
             ry = dist * ny
-            wall_vx = wall_velocity[wall] * nx - wall_tangential_velocity[wall] * ny
-            wall_vy = wall_velocity[wall] * ny + wall_tangential_velocity[wall] * nx
+            wall_vx = w.velocity[wall] * nx - w.tangential_velocity[wall] * ny
+            wall_vy = w.velocity[wall] * ny + w.tangential_velocity[wall] * nx
             dvx = velocity[i, 0] - wall_vx
             dvy = velocity[i, 1] - wall_vy
             spin_sum = ri * omega[i]
             relative_spin = omega[i]
             alpha = 1.0
             angle_j = 0.0
-            wall_shift = wall_tangential_position[wall]
+            wall_shift = w.tangential_position[wall]
         tx = -ny
         ty = nx
         vn = dvx * nx + dvy * ny
         vt = dvx * tx + dvy * ty
         if whole_step:
             vn_d, vt_d, spin_d, relative_spin_d = predicted_relative_motion(
-                predicted, i, j, is_wall, wall_vx, wall_vy, strain_x * rx, strain_y * ry, nx, ny, ri, rj)
+                p.predicted_motion, i, j, is_wall, wall_vx, wall_vy, strain_x * rx, strain_y * ry, nx, ny, ri, rj)
         else:
             vn_d = vn
             vt_d = vt
             spin_d = spin_sum
             relative_spin_d = relative_spin
-        eta = eta_factor * root_reduced_mass[k]
+        eta = laws.eta_factor * ct.root_reduced_mass[k]
         ft = 0.0
         moment = 0.0
         if gap < 0.0:
@@ -298,71 +309,60 @@ def contact_chunk(p, w, cell, ct, law, normal_model, tangential_model, dt, overl
             if overlap > overlap_limit * limit_radius:
                 overlapping += 1
                 max_overlap = max(max_overlap, overlap / limit_radius)
-            ne = normal_elastic(normal_model, kn, overlap, ri, rj, is_wall)
+            # the laws of a touching row stay in the loop: moved into a function, the compiler fuses other
+            # multiply-adds (contract) and runs with cohesion no longer match earlier ones bit for bit
+            kt = laws.kt
+            ne = normal_elastic(normal_model, laws.kn, overlap, ri, rj, is_wall)
             fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
             share = dashpot_share(overlap, vn_d, dt, fresh) if whole_step else 1.0
-            fn = ne - share * eta * vn_d + cohesion_force(f0, d0, gap)
+            fn = ne - share * eta * vn_d + cohesion_force(laws.f0, d0, gap)
             damping += share * eta * vn_d * vn_d * dt
             if fresh:
-                phi = math.atan2(ny, nx)
-                anchor_i[k] = phi + math.pi - angle[i]
-                if is_wall:
-                    anchor_j[k] = tx * position[i, 0] + ty * position[i, 1] - wall_shift
-                else:
-                    anchor_j[k] = phi - angle[j]
-                tangential_spring[k] = 0.0
-                rolling_spring[k] = 0.0
-            row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, anchor_i[k], anchor_j[k], is_wall,
-                              position[i, 0], position[i, 1], wall_shift)
+                anchor(ct, k, angle, i, j, nx, ny, is_wall, position[i, 0], position[i, 1], wall_shift)
+            row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, ct.anchor_angle_i[k],
+                              ct.anchor_angle_j[k], is_wall, position[i, 0], position[i, 1], wall_shift)
             rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
-            previous = 0.0 if fresh else tangential_spring[k]
+            previous = 0.0 if fresh else ct.tangential_spring[k]
             trial = tangential.trial_spring(tangential_model, previous, rate, dt, fresh, row)
             rate_d = tangential.spring_rate(tangential_model, vt_d, spin_d, alpha)
-            spring, ft, state, slip = tangential.limit(tangential_model, kt, mu, gamma_t, ne, fn, trial, rate_d)
+            spring, ft, state, slip = tangential.limit(tangential_model, kt, laws.mu, laws.gamma_t, ne, fn, trial,
+                                                       rate_d)
             # the viscous part of F_t, F_t + K_t D_t, does work (zero while a GranLab spring slides)
             viscous_work = -(ft + kt * spring) * rate_d * dt
-            if not dashpot_in_limit:
+            if tangential.whole_step_dashpots(tangential_model):
                 damping += viscous_work
             else:
-                # LAMMPS limits the dashpot's force with the spring's and rescales the two together,
-                # which can load the spring as it slides, and a contact can chatter between sticking
-                # and sliding: split, either tally could go negative; as one, only by what the
-                # rescale itself creates
+                # LAMMPS's model (the only one with half-step dashpots) limits the dashpot's force with the
+                # spring's and rescales the two together, which can load the spring as it slides, and a
+                # contact can chatter between sticking and sliding: split, either tally could go negative;
+                # as one, only by what the rescale itself creates
                 sliding += viscous_work
             if state != STATUS_STICK:
                 # the elastic force of the step before and of this one, averaged as velocity
                 # Verlet averages them in the kinetic energy: first-order errors cancel
                 sliding += 0.5 * kt * (previous + spring) * slip
-                anchor_i[k] += 0.5 * slip / ri
-                anchor_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
-            tangential_spring[k] = spring
+                ct.anchor_angle_i[k] += 0.5 * slip / ri
+                ct.anchor_angle_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
+            ct.tangential_spring[k] = spring
             status[k] = state
-            if kr > 0.0:
-                previous_roll = 0.0 if fresh else rolling_spring[k]
-                inv_reduced = inv_inertia[i] + (0.0 if is_wall else inv_inertia[j])
-                roll, moment, viscous_work, slip_loss = rolling_step(kr, mu_r, gamma_r_factor, inv_reduced, ne,
-                                                                     previous_roll, relative_spin, relative_spin_d, dt)
+            if laws.kr > 0.0:
+                previous_roll = 0.0 if fresh else ct.rolling_spring[k]
+                inv_reduced = p.inv_inertia[i] + (0.0 if is_wall else p.inv_inertia[j])
+                roll, moment, viscous_work, slip_loss = rolling_step(laws.kr, laws.mu_r, laws.gamma_r_factor,
+                                                                     inv_reduced, ne, previous_roll, relative_spin,
+                                                                     relative_spin_d, dt)
                 damping += viscous_work
                 rolling_loss += slip_loss
-                rolling_spring[k] = roll
+                ct.rolling_spring[k] = roll
         else:
-            fn = 0.0
-            if whole_step and touching(status[k]):
-                share = opened_dashpot_share(gap, vn_d, dt)
-                fn = -share * eta * vn_d
-                damping += share * eta * vn_d * vn_d * dt
-            opening += forget(k, status, tangential_spring, rolling_spring, normal_force, tangential_force,
-                              kt, kr)
-            if f0 > 0.0 and gap < d0:
-                fn += cohesion_force(f0, d0, gap)
-                status[k] = STATUS_COHESIVE
-            elif fn == 0.0:
+            fn, damping, opening = separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening)
+            if fn == 0.0 and status[k] != STATUS_COHESIVE:
                 if store:
                     surface_gap[k] = gap
                 continue
         if store:
-            normal_force[k] = fn
-            tangential_force[k] = ft
+            ct.normal_force[k] = fn
+            ct.tangential_force[k] = ft
             surface_gap[k] = gap
         ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
         fx = fn * nx + ft_centre * tx

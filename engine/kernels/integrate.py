@@ -287,10 +287,10 @@ def cell_step(cell, virial, kinetic, half, kicks, drift, scale):
 
 
 @njit(**KERNEL)
-def contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks):
+def contact_step(p, w, cell, ct, ws, law, run, store):
     """Contact forces into the chunk buffers; walls' reactions, virial corrections, energy tallies."""
-    contact_forces(p, w, cell, ct, law, normal_model, tangential_model, dt, max_overlap, store, n_chunks,
-                   ws.force_buffer, ws.wall_buffer, ws.tally_buffer)
+    n_chunks = run.n_chunks
+    contact_forces(p, w, cell, ct, ws, law, run, store)
     for m in range(w.offset.shape[0]):
         total = 0.0
         for c in range(n_chunks):
@@ -437,13 +437,13 @@ def _start(p, w, cell, ws, run, scale):
 @njit(**KERNEL)
 def _steps(p, w, cell, ct, ws, law, run, step, scale):
     """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``)."""
-    normal_model, tangential_model, gravity, has_loads = run.normal_model, run.tangential_model, run.gravity, run.has_loads
+    gravity, has_loads = run.gravity, run.has_loads
     dt, time_origin, step_offset, n_steps = run.dt, run.time_origin, run.step_offset, run.n_steps
     skin, max_overlap, n_chunks = run.skin, run.max_overlap, run.n_chunks
     half = 0.5 * dt
     while True:
         last = step + 1 == n_steps
-        contact_step(p, w, cell, ct, ws, law, normal_model, tangential_model, dt, max_overlap, last, n_chunks)
+        contact_step(p, w, cell, ct, ws, law, run, last)
         t = time_origin + (step_offset + step + 1) * dt
         if last:
             walls_step(w, t, half, 1, 0.0)
