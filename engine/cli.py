@@ -569,7 +569,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="granlab", description="GranLab: 2D granular mechanics lab")
     parser.add_argument("--version", action="version", version=f"%(prog)s {version('granlab')}")
     commands = parser.add_subparsers(dest="command", required=True)
+    for add in (_add_run, _add_experiment, _add_bench, _add_prepare, _add_study, _add_reproduce, _add_analyze,
+                _add_info):
+        add(commands)
+    return parser
 
+
+def _add_run(commands) -> None:
     run = commands.add_parser("run", help="run a TOML scene (a path or a built-in name)")
     run.add_argument("scene", nargs="?", default="default", help="scene file or built-in name (default: default)")
     run.add_argument("--out", help="write a run file (HDF5, H5MD)")
@@ -586,6 +592,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                  a.checkpoint_every, a.checkpoint_seconds, _run_progress()),
                      printer=_print_run)
 
+
+def _add_experiment(commands) -> None:
     experiment = commands.add_parser("experiment", help="a teaching experiment against its formula")
     experiment.add_argument("name", choices=("collision", "closed-path", "block"))
     experiment.add_argument("--model", default="cundall-strack", choices=TANGENTIAL_MODELS + ("all",),
@@ -596,6 +604,8 @@ def build_parser() -> argparse.ArgumentParser:
     experiment.add_argument("--json", action="store_true", help="print one JSON object")
     experiment.set_defaults(handler=_experiment, printer=_print_experiment)
 
+
+def _add_bench(commands) -> None:
     bench = commands.add_parser("bench", help="particle-steps per second on the LAMMPS reference system")
     bench.add_argument("--steps", type=int, help="timed steps (default 5000; with --scaling 1000 at each size)")
     bench.add_argument("--scaling", action="store_true",
@@ -614,6 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench, printer=_print_bench)
 
+
+def _add_prepare(commands) -> None:
     prepare = commands.add_parser("prepare", help="prepare a packing in equilibrium")
     prepare.add_argument("--method", required=True, choices=("compress", "1", "2"),
                          help="compress: ratcheting biaxial box; 1, 2: Gilabert's methods")
@@ -636,6 +648,8 @@ def build_parser() -> argparse.ArgumentParser:
     prepare.add_argument("--json", action="store_true", help="print one JSON object")
     prepare.set_defaults(handler=_prepare_with_defaults, printer=_print_prepare)
 
+
+def _add_study(commands) -> None:
     study = commands.add_parser("study", help="studies of many samples on Dask")
     kinds = study.add_subparsers(dest="kind", required=True)
     ratchet = kinds.add_parser("ratchet", help="cyclic loading of biaxial boxes (ratcheting Sec. IV B)")
@@ -662,6 +676,8 @@ def build_parser() -> argparse.ArgumentParser:
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")
     ratchet.set_defaults(handler=_study, printer=_print_study)
 
+
+def _add_reproduce(commands) -> None:
     reproduce = commands.add_parser("reproduce", help="reproduce a paper's table on Dask, beside the published values")
     reproduce.add_argument("table", choices=tuple(REPRODUCTIONS),
                            help="Gilabert et al. method 1 (Tables II, III) or method 2 (Tables IV, V, VII)")
@@ -694,6 +710,8 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--json", action="store_true", help="print one JSON object")
     reproduce.set_defaults(handler=_reproduce, printer=_print_reproduce)
 
+
+def _add_analyze(commands) -> None:
     analyze = commands.add_parser("analyze", help="quasi-static and structural analysis of one frame of a run file, "
                                                   "an H5MD file, a LAMMPS dump or an extended XYZ file")
     analyze.add_argument("runfile", metavar="FILE",
@@ -718,11 +736,12 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_argument("--json", action="store_true", help="print one JSON object")
     analyze.set_defaults(handler=_analyze, printer=_print_analysis)
 
+
+def _add_info(commands) -> None:
     info = commands.add_parser("info", help="summarise a run file")
     info.add_argument("runfile")
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.set_defaults(handler=_info, printer=_print_info)
-    return parser
 
 
 def _prepare_with_defaults(args) -> dict:
