@@ -55,16 +55,16 @@ class LabSettings:
         if not (MIN_SPEED <= positive("speed", self.speed, allow_inf=True) <= MAX_SPEED or self.speed == math.inf):
             raise ParameterError("speed", self.speed, f"from {MIN_SPEED:g} to {MAX_SPEED:g} clock units (load cycles, "
                                                       f"loops, T₀) per second, or inf (as fast as it can)")
-        if not (nonnegative("friction", self.friction, allow_inf=True) <= MAX_FRICTION or self.friction == math.inf):
-            raise ParameterError("friction", self.friction, f"a friction coefficient from 0 to {MAX_FRICTION:g}, or inf "
-                                                            f"(no sliding)")
         if not 0.0 < finite("frames_per_cycle", self.frames_per_cycle) <= 100.0:
             raise ParameterError("frames_per_cycle", self.frames_per_cycle,
                                  "from more than 0 to 100 frames kept per clock unit (a load cycle, a loop, T_0)")
-        ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
-                   rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
-                   cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
-                   damping_ratio=self.damping_ratio)
+        law = ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
+                         rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
+                         cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
+                         damping_ratio=self.damping_ratio)
+        if MAX_FRICTION < law.friction < math.inf:  # the law took any μ >= 0; the lab's packings stop sliding here
+            raise ParameterError("friction", self.friction, f"a friction coefficient from 0 to {MAX_FRICTION:g}, or inf "
+                                                            f"(no sliding)")
 
     def replace(self, **changes) -> "LabSettings":
         names = {f.name for f in dataclasses.fields(self)}
