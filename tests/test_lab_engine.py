@@ -453,3 +453,29 @@ def test_a_number_of_disks_the_preset_cannot_use_is_refused_and_the_run_goes_on(
     assert message.text == "Disks N = 2 is not allowed: 4 to 20000 disks for the ratchet16 preset"
     assert engine.status()["particles"] == 16
     wait(lambda: engine.status()["step"] > step)
+
+
+def test_reset_settings_restarts_with_the_presets_own_values_and_a_link_sets_up_once(engine):
+    engine.submit("apply", changes={"friction": 0.6, "tangential_model": "angle"})
+    wait(lambda: engine.status()["settings"]["friction"] == 0.6)
+    seq = engine.messages.latest_seq
+    engine.submit("defaults")
+    wait(lambda: engine.status()["settings"]["tangential_model"] == "cundall-strack")
+    s = engine.status()
+    assert s["settings"]["friction"] == 0.2 and s["settings"]["speed"] == 0.5 and s["time"] < 5.0
+    assert ("info", "the settings of ratchet16 are its own again (restarted at t = 0)") in last_message(engine, seq)
+    assert s["link"] == {"preset": "ratchet16", "speed": "normal"}
+
+    engine.submit("setup", name="block", changes={"friction": 0.3, "speed": 2.0})
+    wait(lambda: engine.status()["preset"] == "block")
+    wait(lambda: engine.status()["time"] > 1.0)
+    s = engine.status()
+    assert s["settings"]["friction"] == 0.3 and s["link"] == {"preset": "block", "friction": "0.3", "speed": "fast"}
+    # the same setup again (a tab reopened on the link) does not restart; only its speed may change
+    engine.submit("setup", name="block", changes={"friction": 0.3, "speed": 0.2})
+    wait(lambda: engine.status()["settings"]["speed"] == 0.2)
+    assert engine.status()["time"] >= s["time"]
+    seq = engine.messages.latest_seq
+    engine.submit("setup", name="block", changes={"friction": -1.0})
+    wait(lambda: engine.messages.latest_seq > seq)
+    assert last_message(engine, seq)[0][0] == "error" and engine.status()["settings"]["friction"] == 0.3

@@ -9,7 +9,7 @@ import pytest
 
 from granlab.engine import ParameterError
 from granlab.engine.protocols.measures import PairMaximum, mobilisation
-from granlab.engine.protocols.presets import PRESETS, make_preset, preset_settings
+from granlab.engine.protocols.presets import PRESETS, make_preset, parse_setup, preset_settings, setup_query
 from granlab.engine.protocols.settings import LabSettings
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
@@ -298,3 +298,41 @@ def test_every_preset_is_a_module_of_the_package_with_its_teaching_text():
         module = Path(__import__(cls.__module__, fromlist=["_"]).__file__)
         assert module.parent == folder and module.name != "__init__.py", name
         assert (STATIC / "teaching" / f"{name}.md").is_file() and teaching_text(name).startswith("# "), name
+
+
+@pytest.mark.parametrize("name", list(PRESETS))
+def test_a_links_query_reads_back_as_the_exact_settings_of_every_preset(name):
+    changes = {"friction": 0.37, "tangential_model": "angle", "damping_ratio": 0.55, "pressure": 1.1,
+               "amplitude": 0.15, "period": 0.1 + 0.2, "phase": -45.0, "seed": 3, "rolling_friction": 1e-3,
+               "cohesion_range": 2e-3, "speed": 20.0}
+    settings = preset_settings(name, **changes)
+    query = setup_query(name, settings)
+    assert query["preset"] == name and query["speed"] == "20"
+    again_name, again = parse_setup(query)
+    assert again_name == name and preset_settings(name, **again) == settings  # 0.1 + 0.2 too: repr reads back
+    # the preset's own settings: the link holds only the preset and its speed, by name
+    own = setup_query(name, preset_settings(name))
+    assert set(own) == {"preset", "speed"}
+    assert own["speed"] in PRESETS[name].speeds or PRESETS[name].defaults.get("speed", 1.0) not in \
+        PRESETS[name].speeds.values()
+
+
+def test_every_named_speed_is_one_the_lab_offers():
+    from granlab.app.lab.dashboard import SPEED_NAMES, SPEEDS
+
+    for cls in PRESETS.values():
+        assert tuple(cls.speeds) == SPEED_NAMES and set(cls.speeds.values()) <= set(SPEEDS.values())
+        assert list(cls.speeds.values()) == sorted(cls.speeds.values())
+
+
+@pytest.mark.parametrize("query, message", [
+    ({"preset": "nowhere"}, "preset = 'nowhere' is not allowed: one of ratchet, ratchet16"),
+    ({"preset": "block", "friction": "much"}, "friction = 'much' is not allowed: a number, or inf"),
+    ({"preset": "block", "friction": "-1"}, "friction = -1.0 is not allowed"),
+    ({"preset": "block", "seed": "1.5"}, "seed = '1.5' is not allowed: a whole number"),
+    ({"preset": "block", "speed": "warp"}, "or a named speed: slow, normal, fast"),
+    ({"preset": "block", "tangential_model": "glue"}, "tangential_model = 'glue' is not allowed"),
+])
+def test_a_link_with_a_value_that_is_not_allowed_names_it_and_what_is(query, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        parse_setup(query)

@@ -14,8 +14,10 @@ the engine refuses goes back to the value in effect, with the message next to it
 
 from __future__ import annotations
 
+import json
 import math
 import time
+import urllib.parse
 from html import escape
 from pathlib import Path
 
@@ -23,8 +25,9 @@ import numpy as np
 import panel as pn
 
 from granlab.engine.analysis import ANALYSES
+from granlab.engine.errors import ParameterError
 from granlab.engine.params import TANGENTIAL_MODELS
-from granlab.engine.protocols.presets import PRESETS
+from granlab.engine.protocols.presets import FIELD_TYPES, PRESETS, Preset, parse_setup, setup_text
 from granlab.engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis
@@ -35,6 +38,20 @@ from .plots import AnalysisFigures, compact, make_plot
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
+FRICTION_SLIDER_END = 1.0
+SPEED_NAMES = ("slow", "normal", "fast")
+"""Each preset's named speeds (:attr:`granlab.engine.protocols.presets.Preset.speeds`), on buttons beside the slider."""
+COPY_LINK_JS = """
+const page = new URLSearchParams(window.location.search)
+const query = new URLSearchParams(JSON.parse(link.value))
+for (const key of ["token", "profile"]) { if (page.get(key)) query.set(key, page.get(key)) }
+const url = window.location.origin + window.location.pathname + "?" + query.toString()
+if (navigator.clipboard) {
+  navigator.clipboard.writeText(url).catch(() => window.prompt("Copy this link:", url))
+} else {  // a page served on a network over http has no clipboard API
+  window.prompt("Copy this link:", url)
+}
+"""
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
@@ -72,7 +89,7 @@ class Dashboard:
     everything live but changes nothing: its controls show the values in effect, disabled, its
     Files group is hidden, and the server ignores any command from its page."""
 
-    def __init__(self, engine, scene, scene_url: str, viewer: bool = False):
+    def __init__(self, engine, scene, scene_url: str, viewer: bool = False, query: dict[str, str] | None = None):
         self.engine = engine
         self.viewer = viewer
         self.scene = scene
@@ -98,14 +115,30 @@ class Dashboard:
         self.right = pn.Column(sizing_mode="stretch_both", styles={"flex": "1 1 0"})
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
         self.about = pn.Column(self.teaching, sizing_mode="stretch_both", scroll=True)
-        self.readout = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["readout"])
+        self.readout = pn.pane.HTML("", css_classes=["readout"], styles={"flex": "0 1 auto", "min-width": "0"})
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
             f'<iframe src="{scene_url}" title="3D scene" style="width:100%;height:100%;border:0"></iframe>',
             sizing_mode="stretch_both", min_height=300, css_classes=["scene"])
         self.key_names: list[str] = []
         self.page = self._layout()
+        if not viewer:
+            self._open_link(query or {})
         self._refresh()
+
+    def _open_link(self, query: dict[str, str]) -> None:
+        """The setup a link's address holds (preset, settings, speed), checked here: a link with a
+        value the lab does not allow changes nothing and says why."""
+        if not set(query) & (set(FIELD_TYPES) | {"preset"}):
+            return
+        try:
+            name, changes = parse_setup(query)
+        except ParameterError as error:
+            self._note("preset", "error", f"this link's setup was not used (the lab goes on as it was): {error}")
+            return
+        # said here too: bokeh may build this tab's page twice, and to the second the setup is already running
+        self._note("preset", "info", setup_text(name, changes))
+        self.engine.submit("setup", name=name, changes=changes)
 
     # ------------------------------------------------------------------ widgets
     def _note_pane(self, key: str) -> pn.pane.HTML:
@@ -116,26 +149,31 @@ class Dashboard:
     def _build_widgets(self) -> None:
         W = pn.widgets
         wide = {"sizing_mode": "stretch_width"}
-        self.preset = W.Select(options=PRESET_OPTIONS, value="ratchet", css_classes=["preset-select"], width=340,
+        self.preset = W.Select(options=PRESET_OPTIONS, value="ratchet", css_classes=["preset-select"], width=270,
                                margin=(12, 10, 5, 10))
-        self.play = W.Button(name="Pause", button_type="primary", css_classes=["play-button"], width=80,
+        self.play = W.Button(name="Pause", button_type="primary", css_classes=["play-button"], width=72,
                              margin=(12, 4, 5, 4))
-        self.step = W.Button(name="Step", css_classes=["step-button"], width=60, margin=(12, 4, 5, 4))
-        self.reset = W.Button(name="Restart preset", button_type="warning", css_classes=["reset-button"], width=120,
+        self.step = W.Button(name="Step", css_classes=["step-button"], width=56, margin=(12, 4, 5, 4))
+        self.reset = W.Button(name="Restart", button_type="warning", css_classes=["reset-button"], width=76,
                               margin=(12, 4, 5, 4))
+        self.defaults = W.Button(name="Reset settings", css_classes=["defaults-button"], width=112,
+                                 margin=(12, 4, 5, 4))
         self.speed = W.DiscreteSlider(name="Speed", options=SPEEDS, value=1.0, css_classes=["speed-slider"],
-                                      width=230, margin=(2, 12, 5, 12))
+                                      width=170, margin=(2, 8, 5, 12))
+        self.named_speeds = {name: W.Button(name=name, css_classes=["named-speed", f"speed-{name}"], width=58,
+                                            margin=(12, 1, 5, 1)) for name in SPEED_NAMES}
+        self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 8))
+        # the link's query, which the button's script reads in the page (the clipboard is the page's)
+        self.link_query = W.TextInput(value="{}", visible=False, width=10, css_classes=["link-query"])
         # a viewer is shown the speed as text: panel draws a disabled DiscreteSlider with its handle
         # at the far end, whatever its value
-        self.speed_text = pn.pane.HTML("", css_classes=["speed-text"], width=230, margin=(14, 12, 5, 12),
-                                       visible=self.viewer)
-        self.speed.visible = not self.viewer
+        self.speed_text = pn.pane.HTML("", css_classes=["speed-text"], width=230, margin=(14, 12, 5, 12))
         self.phase = W.FloatSlider(name="Loading phase φ (°)", start=-180, end=180, step=5, value=0.0,
                                    css_classes=["phase-slider"], **wide)
         self.amplitude = W.FloatInput(name="Amplitude Δσ", value=0.2, step=0.05, css_classes=["amplitude-input"], **wide)
         self.pressure = W.FloatInput(name="Pressure P0", value=1.0, step=0.1, css_classes=["pressure-input"], **wide)
         self.period = W.FloatInput(name="Period T", value=10.0, step=1.0, css_classes=["period-input"], **wide)
-        self.friction = W.FloatSlider(name="Friction μ", start=0.0, end=1.0, step=0.01, value=0.2,
+        self.friction = W.FloatSlider(name="Friction μ", start=0.0, end=FRICTION_SLIDER_END, step=0.01, value=0.2,
                                       css_classes=["friction-slider"], **wide)
         self.no_sliding = W.Checkbox(name="μ = ∞ (no sliding)", value=False, css_classes=["friction-infinite"])
         self.model = W.Select(name="Tangential spring", options=list(TANGENTIAL_MODELS), css_classes=["model-select"],
@@ -181,6 +219,12 @@ class Dashboard:
         self.play.on_click(lambda e: self._command("pause" if self.play.name == "Pause" else "play"))
         self.step.on_click(lambda e: self._command("step"))
         self.reset.on_click(lambda e: self._command("reset"))
+        self.defaults.on_click(lambda e: self._command("defaults"))
+        for name, button in self.named_speeds.items():
+            button.on_click(lambda e, name=name: self._control("speed", self._speeds().get(name, 1.0)))
+        self.copy_link.js_on_click(args={"link": self.link_query}, code=COPY_LINK_JS)
+        self.copy_link.on_click(lambda e: self._note("preset", "info", "link copied: this page's address with ?" +
+                                                     urllib.parse.urlencode(json.loads(self.link_query.value))))
         self.speed.param.watch(lambda e: self._control("speed", e.new), "value")
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
@@ -206,6 +250,11 @@ class Dashboard:
         self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
                                                      seconds=self.record_seconds.value, color=self.scene.color_field))
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
+
+    def _speeds(self) -> dict[str, float]:
+        """The named speeds of the preset shown (of the replayed run's preset in a replay)."""
+        cls = PRESETS.get(self.preset_shown) or PRESETS.get((self.engine.status().get("replay") or {}).get("of"))
+        return cls.speeds if cls else Preset.speeds
 
     def _friction(self) -> None:
         self._friction_in_effect(not self.no_sliding.value)
@@ -449,6 +498,7 @@ class Dashboard:
         self.speed_text.object = (f"<div style='font-size:14px'>{escape(self.speed.name)}: "
                                   f"<b>{_speed_label(self.speed.value)}</b></div>")
         self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
+        self._show_speed_and_link(status)
         readout = status.get("readout") or {}
         fit = status.get("strain") or {}
         parts = [f"<b>{status.get('stage', '')}</b>",
@@ -477,6 +527,16 @@ class Dashboard:
             self._legend_key = key
             self.legend.object = legend_html(self.scene.color_field, list(key[1]), *key[2:])
         self._show_replay(status)
+
+    def _show_speed_and_link(self, status: dict) -> None:
+        """The named speed in effect highlighted; the link's query kept for the Copy link button."""
+        speed = status.get("speed") if status.get("replay") else (status.get("settings") or {}).get("speed")
+        speed = math.inf if speed == "inf" else speed
+        for name, button in self.named_speeds.items():
+            button.button_type = "primary" if self._speeds().get(name) == speed else "default"
+        link = json.dumps(status.get("link") or {"preset": status.get("preset", "ratchet")})
+        if self.link_query.value != link:
+            self.link_query.value = link
 
     def _show_replay(self, status: dict) -> None:
         replay = status.get("replay")
@@ -530,7 +590,9 @@ class Dashboard:
             if widget is self.no_sliding:
                 widget.value = value == math.inf
             elif widget is self.friction:
-                widget.value = widget.value if value == math.inf else float(value)
+                if value != math.inf:  # a μ beyond the slider's end (a link's, up to 10) moves the end
+                    widget.end = max(FRICTION_SLIDER_END, float(value))
+                    widget.value = float(value)
                 self._friction_in_effect(value != math.inf, locked=widget.disabled)
             else:
                 widget.value = value
@@ -584,18 +646,22 @@ class Dashboard:
             for widget in (self.preset, self.play, self.step, self.reset, self.apply_reset, self.color,
                            self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
                 widget.disabled = True
-        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, width=250,
+        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, self.link_query, width=250,
                             sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
         title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
                  "runs it</div>" if self.viewer else "GranLab")
+        # only what this tab shows: a hidden widget in a row still widens it
+        controls = ([self.speed_text] if self.viewer else
+                    [self.defaults, self.speed, *self.named_speeds.values(), self.copy_link])
         header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
                                      width=105 + 95 * self.viewer),
-                        self.preset, self.play, self.step, self.reset, self.speed, self.speed_text,
-                        pn.Column(self._note_pane("preset"), self._note_pane("run"), self._note_pane("speed"),
-                                  sizing_mode="stretch_width", margin=(6, 0, 0, 0)),
+                        self.preset, self.play, self.step, self.reset, *controls,
                         height=HEADER_HEIGHT, sizing_mode="stretch_width", styles={"overflow": "hidden"})
-        # the readout on a line of its own, of fixed height: nothing below it moves as it changes
-        readout = pn.Row(self.readout, height=26, sizing_mode="stretch_width", margin=0,
+        # the readout on a line of its own, of fixed height: nothing below it moves as it changes; the
+        # header's messages at its right end, beside the buttons that cause them
+        notes = pn.Column(*(self._note_pane(key) for key in HEADER_NOTES), sizing_mode="stretch_width",
+                          margin=(5, 0, 0, 0), styles={"flex": "1 1 0", "min-width": "0", "overflow": "hidden"})
+        readout = pn.Row(self.readout, notes, height=26, sizing_mode="stretch_width", margin=0,
                          styles={"border-bottom": "1px solid #ddd", "background": "#f6f7f9", "overflow": "hidden"})
         self.timeline_label = pn.pane.HTML("", width=220)
         self.timeline_row = pn.Row(self.timeline, self.timeline_label, self._note_pane("replay"),

@@ -37,7 +37,8 @@ from granlab.engine.frames import FrameData, SceneFrame, build_frame
 from granlab.engine.io.jsonsafe import jsonable
 from granlab.engine.io.outputs import free_name, occupied
 from granlab.engine.params import positive
-from granlab.engine.protocols.presets import PRESETS, Preset, make_preset, preset_settings
+from granlab.engine.protocols.presets import (PRESETS, Preset, make_preset, preset_settings, setup_query,
+                                              setup_text)
 from granlab.engine.protocols.settings import CONTROL_LABELS, RESET_CONTROLS, LabSettings
 
 from .analysis import AnalysisResult, AnalysisRunner
@@ -226,7 +227,8 @@ class LabEngine:
     def _execute(self, command: str, payload: dict, submitted: float) -> None:
         control = {"apply": next(iter(payload.get("changes", {})), ""), "watch": "watch", "watch_disk": "watch",
                    "save": "save", "load": "load", "record": "record", "analyze": "analysis",
-                   "preset": "preset", "seek": "replay", "cancel": payload.get("kind", "run")}.get(command, "run")
+                   "preset": "preset", "setup": "preset", "seek": "replay",
+                   "cancel": payload.get("kind", "run")}.get(command, "run")
         try:
             if command == "apply":
                 self._apply(payload["changes"])
@@ -239,6 +241,13 @@ class LabEngine:
                 self._switch(make_preset(name, self._settings() if isinstance(self.source, Preset) else None))
                 self.running = True
                 self._info("preset restarted at t = 0", "run")
+            elif command == "defaults":
+                preset = self._preset_only("defaults")
+                self._switch(make_preset(preset.name))
+                self.running = not self.waiting
+                self._info(f"the settings of {preset.name} are its own again (restarted at t = 0)", "run")
+            elif command == "setup":
+                self._setup(payload["name"], payload["changes"])
             elif command == "tab_opened":
                 if self.waiting:
                     self.waiting, self.running = False, True
@@ -289,7 +298,8 @@ class LabEngine:
     def _preset_only(self, what: str) -> Preset:
         if not isinstance(self.source, Preset):
             verb = {"save": "Save", "record": "Record", "watch": "Watching a contact",
-                    "controls": "Changing a setting", "fit": "Fitting the strain"}.get(what, what)
+                    "controls": "Changing a setting", "fit": "Fitting the strain",
+                    "defaults": "Resetting the settings"}.get(what, what)
             raise GranLabError(f"{verb} works on a running preset, not on a replay ({self.source.path.name} is "
                                f"already a file): choose a preset first (a movie of a replay: granlab render "
                                f"{self.source.path.name} --out movie.gif)")
@@ -323,6 +333,20 @@ class LabEngine:
                        f"effect stay)", key)
             return
         self._info(f"applied: {labels}" + (f" ({'; '.join(notes)})" if notes else ""), key)
+
+    def _setup(self, name: str, changes: dict) -> None:
+        """The setup of a link: preset ``name`` with ``changes`` of its own settings, from t = 0
+        unless it is the one running (then only its speed may change)."""
+        settings = preset_settings(name, **changes)
+        source = self.source
+        running = isinstance(source, Preset) and source.name == name
+        if running and source.settings.replace(speed=settings.speed) == settings:
+            if settings.speed != source.settings.speed:
+                self._apply({"speed": settings.speed})
+            return
+        self._switch(make_preset(name, settings))
+        self.running = not self.waiting
+        self._info(setup_text(name, changes) + " (from t = 0)", "preset")
 
     def _switch(self, source) -> None:
         """Show ``source`` (a preset from its start, or a replay at its first frame)."""
@@ -482,7 +506,8 @@ class LabEngine:
             status = source.status()
             status.update(time=sim.time, step=sim.step, particles=sum(v.sim.particles.count for v in views),
                           dt=sim.dt, watched=[list(p) for p in source.watched()],
-                          watched_labels=source.watched_labels())
+                          watched_labels=source.watched_labels(), link=setup_query(source.name, source.settings),
+                          speeds=source.speeds)
         seconds = sum(r[3] for r in self._rate)
         span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
         simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0

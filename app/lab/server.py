@@ -180,7 +180,9 @@ class Lab:
         token = self._session_token()
         if token:  # viser's client drops the page's query; its websocket address may carry a path
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
-        return Dashboard(self.engine, self.scene, scene_url, viewer=self.roles.get(token) == "viewer").view()
+        query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items() if values}
+        return Dashboard(self.engine, self.scene, scene_url, viewer=self.roles.get(token) == "viewer",
+                         query=query).view()
 
     def _session_token(self) -> str:
         """The valid token of the page being opened: in its address, else in its cookie."""

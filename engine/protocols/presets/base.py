@@ -71,6 +71,9 @@ class Preset(ABC):
     key_plots: tuple[str, ...] = ()
     #: what the speed control counts per second of wall clock (plural); one lasts :meth:`cycle_time`
     clock_unit = "load cycles"
+    #: the named speeds beside the numeric one, in clock units per second (inf: as fast as it can);
+    #: each is one of the lab's speeds
+    speeds = {"slow": 0.2, "normal": 0.5, "fast": 2.0}
     #: the time axes' label (the preset's unit of time)
     time_label = "t"
     #: the time plots show the last ``window_cycles`` clock units (0: the whole run)

@@ -3,6 +3,8 @@ that follows the damping ratio."""
 
 from __future__ import annotations
 
+import math
+
 from .base import Preset
 
 
@@ -12,6 +14,7 @@ class GilabertPreset(Preset):
     ``damping_ratio``, also when that control changes."""
 
     clock_unit = "T₀"
+    speeds = {"slow": 2.0, "normal": 10.0, "fast": math.inf}  # 300 disks: a few tens of T₀ a second at most
     time_label = "t (T₀ = √(m a/F₁))"
     window_cycles = 0
     samples_per_cycle = 2

@@ -40,6 +40,7 @@ class RatchetPreset(Preset):
     menu_name = "Biaxial box, cyclic loading"
     controls = ("pressure", "amplitude", "period", "phase", "particles", "seed") + LAW_CONTROLS
     defaults = {"particles": 256, "speed": math.inf}
+    speeds = {"slow": 0.1, "normal": 0.5, "fast": math.inf}  # 256 disks: about 1 load cycle a second at most
     series = {"time": ("t", "cycle", "q", "gamma", "kinetic", "stored", "dissipated", "balance", "z"),
               "cycles": ("cycle", "gamma", "t", "step", "length_x", "length_y"),
               "contacts": ("i", "j", "t", "normal", "tangential", "status")}
@@ -261,6 +262,7 @@ class Ratchet16Preset(RatchetPreset):
     title = "Ratcheting with 16 disks (ratcheting Figs. 1-4)"
     menu_name = "Ratcheting, 16 disks (Figs. 1–4)"
     defaults = {"particles": 16, "speed": 0.5}
+    speeds = Preset.speeds
     key_plots = ("strain-per-cycle", "coulomb-cone")
     watch_count = 6
 
@@ -270,6 +272,7 @@ class EllipticPreset(RatchetPreset):
     title = "Elliptic loading without sliding (ratcheting Figs. 5-6)"
     menu_name = "Elliptic loading (Figs. 5–6)"
     defaults = {"particles": 16, "friction": math.inf, "phase": 90.0, "speed": 0.5}
+    speeds = Preset.speeds
     key_plots = ("strain-per-cycle", "coulomb-cone")
     elliptic = True
     watch_count = 6
