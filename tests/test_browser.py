@@ -161,7 +161,7 @@ def test_the_page_asks_nothing_of_other_hosts_and_logs_no_error_with_the_scene_o
     count = frame.evaluate("() => window.__viserTestpoints.rendererInfo.render.frame")
     frame.wait_for_function(f"() => window.__viserTestpoints.rendererInfo.render.frame > {count}", polling=200,
                             timeout=30000)
-    page.locator(".pane-choice button", has_text="About this preset").click()
+    page.locator(".pane-choice button", has_text="About").click()
     page.locator(".pane-choice button", has_text="Analysis").click()
     page.wait_for_timeout(2000)
     assert outside == [] and errors == []
@@ -459,7 +459,7 @@ def test_preset_switch_builds_its_plots_and_its_text(page, lab):
     choose_preset(page, lab, "block")
     wait_model(page, "series-block-load", "m.data.t.length > 3")
     wait_model(page, "block-cone-paths", "m.data.x0.length > 3")
-    page.locator(".pane-choice button", has_text="About this preset").click()
+    page.locator(".pane-choice button", has_text="About").click()
     expect(page.locator(".teaching h1")).to_contain_text("minimum sliding", timeout=10000)
 
 
@@ -585,7 +585,8 @@ def http_status(url: str) -> int:
 def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     bare = token_lab["url"].split("?")[0]
     assert token_lab["viewer"].split("?")[0] == bare and token_lab["viewer"] != token_lab["url"]
-    for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong"):
+    for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong",
+                bare + "lesson?preset=block"):
         assert http_status(url) == 403, url
     assert http_status(endpoint(token_lab["viewer"], "status")) == 200
     # the presenter's address is not printed (a projector may show the terminal) but kept for its owner

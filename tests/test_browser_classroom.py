@@ -9,10 +9,11 @@ from urllib.parse import parse_qs, urlparse
 import pytest
 from playwright.sync_api import expect
 
+from granlab.app.lab import lessons
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
 from tests.test_browser import browser_context_args, browser_type_launch_args  # noqa: F401 (Debian's Chromium)
-from tests.test_browser import lab_only, open_dashboard, status, wait_status
+from tests.test_browser import http_status, lab_only, open_dashboard, status, wait_status
 
 
 @pytest.fixture(scope="module")
@@ -105,3 +106,21 @@ def test_reset_settings_brings_back_the_presets_own_values_and_restart_keeps_the
     expect(page.locator(".note-run")).to_contain_text("its own again")
     expect(page.locator(".note-run")).to_be_visible()
     assert json.loads(page.locator(".link-query input").input_value()) == {"preset": "ratchet16", "speed": "normal"}
+
+
+def test_the_lesson_pane_shows_the_presets_sheet_and_its_page_to_print(page, lab):
+    open_dashboard(page, lab, "block")
+    page.locator(".pane-choice button", has_text="Lesson").click()
+    sheet = lessons.lesson("block")
+    first = page.locator(".lesson h2").first
+    expect(first).to_be_visible(timeout=10000)
+    expect(first).to_contain_text(sheet.steps[0].title.split("*")[0][:20])
+    assert page.locator(".lesson h2").count() == len(sheet.steps)
+    with page.context.expect_page() as opened:
+        page.locator(".lesson a", has_text="Print this sheet").click()
+    printable = opened.value
+    printable.wait_for_load_state()
+    assert urlparse(printable.url).path == "/lesson" and printable.locator("section.lesson-step").count() == len(
+        sheet.steps)
+    printable.close()
+    assert http_status(lab["url"] + "lesson?preset=nowhere") == 404

@@ -30,7 +30,7 @@ from granlab.engine.params import TANGENTIAL_MODELS
 from granlab.engine.protocols.presets import FIELD_TYPES, PRESETS, Preset, parse_setup, setup_text
 from granlab.engine.protocols.settings import CONTROL_LABELS
 
-from . import analysis
+from . import analysis, lessons
 from .buffers import Cursor
 from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
@@ -57,7 +57,7 @@ SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, 
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
 JOB_KINDS = ("save", "load", "record")
 """The file jobs, each shown beside its button while it runs (:mod:`granlab.app.lab.jobs`)."""
-PANES = ("Key plots", "More plots", "About this preset", "Analysis")
+PANES = ("Key plots", "More plots", "About", "Lesson", "Analysis")
 HEADER_HEIGHT = 58
 HEADER_NOTES = ("preset", "run", "speed")
 """Messages shown in the header, beside the buttons that cause them."""
@@ -68,6 +68,15 @@ NOTE_SECONDS = 12.0
 def teaching_text(preset: str) -> str:
     path = STATIC / "teaching" / f"{preset}.md"
     return path.read_text() if path.is_file() else f"*No teaching text for preset {preset!r}.*"
+
+
+def lesson_pane(preset: str) -> str:
+    """The preset's lesson sheet with a link to its printable page (served by the lab at ``lesson``)."""
+    sheet = lessons.lesson(preset)
+    if sheet is None:
+        return f"<p><i>No lesson sheet for preset {escape(preset)}.</i></p>"
+    return (f"<p style='font-size:13px'><a href='lesson?preset={escape(preset)}' target='_blank'>Print this sheet</a> "
+            f"(one page; its shaded boxes are for the teacher)</p>" + lessons.lesson_html(sheet))
 
 
 def _speed_label(speed) -> str:
@@ -115,6 +124,8 @@ class Dashboard:
         self.right = pn.Column(sizing_mode="stretch_both", styles={"flex": "1 1 0"})
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
         self.about = pn.Column(self.teaching, sizing_mode="stretch_both", scroll=True)
+        self.lesson = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["lesson"])
+        self.lesson_view = pn.Column(self.lesson, sizing_mode="stretch_both", scroll=True)
         self.readout = pn.pane.HTML("", css_classes=["readout"], styles={"flex": "0 1 auto", "min-width": "0"})
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
@@ -362,8 +373,10 @@ class Dashboard:
             others = [p.pane for p in plots if p not in keys]
             self.right.objects = [self.pane_choice, self._plot_column(others) if others else
                                   pn.pane.Markdown("*This preset has no other plots.*")]
-        elif choice == "About this preset":
+        elif choice == "About":
             self.right.objects = [self.pane_choice, self.about]
+        elif choice == "Lesson":
+            self.right.objects = [self.pane_choice, self.lesson_view]
         else:
             self.right.objects = [self.pane_choice, self.analysis_view]
 
@@ -431,6 +444,7 @@ class Dashboard:
             plot = (status.get("replay") or {}).get("plot", "replay-energy")
             self.key_names = [plot]
             self._use_plots(self.key_names, "t", {})
+            self.lesson.object = "<p><i>The lesson sheets go with the presets: choose one.</i></p>"
             if plot == "replay-energy":
                 self.teaching.object = f"## {status.get('title', 'Replay')}\nA saved run played back frame by frame."
             else:
@@ -443,6 +457,7 @@ class Dashboard:
             self.key_names = list(cls.key_plots)
             self._use_plots(list(cls.plots), cls.time_label, cls.series, getattr(cls, "reference_cycle", 0))
             self.teaching.object = teaching_text(shown_as)
+            self.lesson.object = lesson_pane(shown_as)
         self.pane_choice.value = PANES[0]
         self._show_pane()
         self._sync(status)

@@ -47,7 +47,9 @@ from websockets.http11 import Request
 from granlab.engine.errors import GranLabError
 from granlab.engine.io.jsonsafe import jsonable
 from granlab.engine.io.outputs import check_output
+from granlab.engine.protocols.presets import PRESETS
 
+from . import lessons
 from .dashboard import Dashboard
 from .engine_thread import HISTORY_MIB, LabEngine
 from .scene import SceneView
@@ -126,6 +128,26 @@ class JSONHandler(tornado.web.RequestHandler):
         self.write(json.dumps(jsonable(self.read())))
 
 
+class LessonHandler(tornado.web.RequestHandler):
+    """``GET lesson?preset=NAME``: the preset's lesson sheet as a page to print (with ``roles``, only
+    to a request with a valid token, which the dashboard's cookie carries)."""
+
+    def initialize(self, roles):
+        self.roles = roles
+
+    def prepare(self):
+        if self.roles and request_role(self, self.roles) is None:
+            raise tornado.web.HTTPError(403, "a valid token is needed")
+
+    def get(self):
+        name = self.get_query_argument("preset", "")
+        sheet = lessons.lesson(name) if name in PRESETS else None
+        if sheet is None:
+            raise tornado.web.HTTPError(404, f"no lesson sheet for preset {name!r}: one of {', '.join(PRESETS)}")
+        self.set_header("Content-Type", "text/html; charset=utf-8")
+        self.write(lessons.lesson_html(sheet, standalone=True))
+
+
 class Lab:
     """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server."""
 
@@ -156,7 +178,8 @@ class Lab:
                                show=False, start=False, title="GranLab", threaded=False, verbose=False,
                                extra_patterns=[(r"/status", JSONHandler, {"read": self.status, "roles": self.roles}),
                                                (r"/scene", JSONHandler, {"read": self.scene.state,
-                                                                         "roles": self.roles})],
+                                                                         "roles": self.roles}),
+                                               (r"/lesson", LessonHandler, {"roles": self.roles})],
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
                                **auth)
 
