@@ -18,8 +18,9 @@ from tests.test_browser import http_status, lab_only, open_dashboard, status, wa
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
-    process, url, _ = spawn(tmp_path_factory.mktemp("classroom-lab-data"))
-    yield {"url": url, "process": process}
+    data = tmp_path_factory.mktemp("classroom-lab-data")
+    process, url, _ = spawn(data)
+    yield {"url": url, "process": process, "data": data}
     process.terminate()
     process.wait(timeout=30)
 
@@ -124,3 +125,230 @@ def test_the_lesson_pane_shows_the_presets_sheet_and_its_page_to_print(page, lab
         sheet.steps)
     printable.close()
     assert http_status(lab["url"] + "lesson?preset=nowhere") == 404
+
+
+HEADER = ("preset-select", "play-button", "step-button", "reset-button", "defaults-button", "speed-slider",
+          "speed-slow", "speed-normal", "speed-fast", "copy-link-button", "keys")
+SIDEBAR = (("phase", "phase-slider"), ("amplitude", "amplitude-input"), ("pressure", "pressure-input"),
+           ("period", "period-input"), ("fit", "fit-now-button"), ("friction", "friction-slider"),
+           ("friction", "friction-infinite"), ("tangential_model", "model-select"), ("damping_ratio", "damping-slider"),
+           ("rolling_friction", "rolling-friction-input"), ("rolling_stiffness", "rolling-stiffness-input"),
+           ("cohesion_force", "cohesion-force-input"), ("cohesion_range", "cohesion-range-input"),
+           ("particles", "particles-input"), ("seed", "seed-input"), ("particles", "apply-reset-button"))
+FILES = ("color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button", "load-select",
+         "load-button", "record-name", "record-seconds", "record-button", "pane-choice")
+KNOWN = set(HEADER) | {css for _, css in SIDEBAR} | set(FILES)
+FOCUSED = """() => {
+  let el = document.activeElement
+  const classes = [...(el.classList || [])]
+  while (el && el.shadowRoot && el.shadowRoot.activeElement) {
+    el = el.shadowRoot.activeElement
+    classes.push(...(el.classList || []))
+  }
+  const style = getComputedStyle(el)
+  return {classes, ring: style.outlineStyle !== "none" && parseFloat(style.outlineWidth) >= 3}
+}"""
+
+
+def designed_order(name: str) -> list[str]:
+    cls = PRESETS[name]
+    shown = [css for key, css in SIDEBAR if key in cls.controls or (key == "fit" and "strain-per-cycle" in cls.plots)]
+    return [*HEADER, *shown, *FILES]
+
+
+def test_tab_reaches_every_control_of_every_preset_in_the_designed_order_with_a_visible_ring(page, lab):
+    open_dashboard(page, lab, "ratchet16")
+    for name in PRESETS:
+        page.select_option(".preset-select select", label=PRESETS[name].menu_name)
+        wait_status(lab, lambda s: s["preset"] == name)
+        order = designed_order(name)
+        for css in order:  # the page shows the preset's controls, and only those
+            expect(page.locator(f".{css}").first).to_be_visible()
+        for css in {css for _, css in SIDEBAR} - set(order):
+            expect(page.locator(f".{css}").first).to_be_hidden()
+        page.locator(".preset-select select").focus()  # the first control of the page
+        stops = []
+        for _ in range(120):
+            focused = page.evaluate(FOCUSED)
+            known = [css for css in focused["classes"] if css in KNOWN]
+            if known:
+                assert focused["ring"], f"{name}: no visible focus ring on {known[0]}"
+                if not stops or stops[-1] != known[0]:
+                    stops.append(known[0])
+            if stops and stops[-1] == "pane-choice":
+                break
+            page.keyboard.press("Tab")
+        assert stops == order, name
+
+
+def test_the_shortcuts_play_pause_step_restart_reset_and_list_the_keys(page, lab):
+    open_dashboard(page, lab, "ratchet16")
+    wait_status(lab, lambda s: s["state"] == "running")
+    page.locator(".readout").click()  # focus on no control: the page's own keys
+    page.keyboard.press("Space")
+    wait_status(lab, lambda s: s["state"] == "paused")
+    before = status(lab)["time"]
+    page.keyboard.press("ArrowRight")
+    s = wait_status(lab, lambda s: s["time"] > before and s["state"] == "paused")
+    page.keyboard.press("Space")
+    wait_status(lab, lambda s: s["state"] == "running")
+    page.locator(".amplitude-input input").fill("0.3")
+    page.keyboard.press("Enter")
+    wait_status(lab, lambda s: s["settings"]["amplitude"] == 0.3 and s["time"] > 20.0, timeout=60)
+    page.locator(".readout").click()
+    page.keyboard.press("Alt+r")
+    s = wait_status(lab, lambda s: s["time"] < 10.0)
+    assert s["settings"]["amplitude"] == 0.3
+    page.keyboard.press("Alt+Shift+R")
+    wait_status(lab, lambda s: s["settings"]["amplitude"] == 0.2)
+    # in a text box the keys are the box's: a space typed is a space, not a pause
+    page.locator(".watch-input input").focus()
+    page.keyboard.type("3 7")
+    assert page.locator(".watch-input input").input_value() == "3 7" and status(lab)["state"] == "running"
+    page.locator(".readout").click()
+    page.keyboard.press("?")
+    dialog = page.locator(".keys-dialog")
+    expect(dialog).to_be_visible()
+    for key in ("Space", "Alt+R", "Alt+Shift+R", "PageUp/PageDown"):
+        expect(dialog).to_contain_text(key)
+    page.keyboard.press("Escape")
+    expect(dialog).to_be_hidden()
+
+
+def focus(page, css: str):
+    page.locator(css).first.focus()
+
+
+def test_each_control_works_from_the_keyboard(browser, lab):
+    context = browser.new_context(viewport={"width": 1366, "height": 768},
+                                  permissions=["clipboard-read", "clipboard-write"])
+    page = context.new_page()
+    open_dashboard(page, lab, "ratchet16")
+    press = page.keyboard.press
+
+    def type_in(css: str, text: str):
+        focus(page, f"{css} input")
+        page.keyboard.press("Control+a")
+        page.keyboard.type(text)
+        press("Enter")
+
+    # the header
+    focus(page, ".play-button button")
+    press("Enter")
+    wait_status(lab, lambda s: s["state"] == "paused")
+    press("Space")
+    wait_status(lab, lambda s: s["state"] == "running")
+    focus(page, ".step-button button")
+    press("Enter")
+    wait_status(lab, lambda s: s["state"] in ("paused", "stepping"))
+    focus(page, ".play-button button")
+    press("Enter")
+    for name in ("fast", "slow", "normal"):
+        focus(page, f".speed-{name} button")
+        press("Enter")
+        wait_status(lab, lambda s: speed(s) == PRESETS["ratchet16"].speeds[name])
+    focus(page, ".speed-slider .noUi-handle")
+    press("ArrowRight")
+    wait_status(lab, lambda s: speed(s) == 1.0)
+    press("End")
+    wait_status(lab, lambda s: speed(s) == math.inf)
+    focus(page, ".speed-normal button")
+    press("Enter")
+    focus(page, ".copy-link-button button")
+    press("Enter")
+    expect(page.locator(".note-preset")).to_contain_text("link copied")
+    focus(page, ".keys button")
+    press("Enter")
+    expect(page.locator(".keys-dialog")).to_be_visible()
+    press("Escape")
+
+    # the loading: a slider and boxes (they wait for the next cycle while the box is cycled)
+    wait_status(lab, lambda s: s["stage"] == "cycling", timeout=60)
+    focus(page, ".phase-slider .noUi-handle")
+    press("ArrowRight")
+    wait_status(lab, lambda s: s["settings"]["phase"] == 5.0 or s["pending"].get("phase") == 5.0)
+    type_in(".amplitude-input", "0.25")
+    type_in(".pressure-input", "1.2")
+    type_in(".period-input", "12")
+    wait_status(lab, lambda s: s["settings"]["amplitude"] == 0.25 and s["settings"]["pressure"] == 1.2
+                and s["settings"]["period"] == 12.0, timeout=60)
+    focus(page, ".fit-now-button button")
+    press("Enter")
+    expect(page.locator(".note-fit")).to_be_visible()
+
+    # the contacts
+    focus(page, ".friction-slider .noUi-handle")
+    press("ArrowRight")
+    wait_status(lab, lambda s: s["settings"]["friction"] == 0.25)
+    press("Shift+ArrowLeft")
+    wait_status(lab, lambda s: s["settings"]["friction"] == 0.24)
+    press("PageUp")
+    wait_status(lab, lambda s: s["settings"]["friction"] == 0.44)
+    focus(page, ".friction-infinite input")
+    press("Space")
+    wait_status(lab, lambda s: s["settings"]["friction"] == "inf")
+    press("Space")
+    wait_status(lab, lambda s: s["settings"]["friction"] == 0.44)
+    focus(page, ".model-select select")
+    press("ArrowDown")
+    wait_status(lab, lambda s: s["settings"]["tangential_model"] != "cundall-strack")
+    focus(page, ".damping-slider .noUi-handle")
+    press("ArrowRight")
+    wait_status(lab, lambda s: s["settings"]["damping_ratio"] == 0.35)
+    type_in(".rolling-stiffness-input", "0.5")
+    type_in(".rolling-friction-input", "0.01")
+    type_in(".cohesion-range-input", "0.001")
+    type_in(".cohesion-force-input", "0.1")
+    wait_status(lab, lambda s: s["settings"]["rolling_friction"] == 0.01 and s["settings"]["cohesion_force"] == 0.1)
+
+    # the sample: N and seed apply with a restart
+    type_in(".particles-input", "20")
+    type_in(".seed-input", "2")
+    focus(page, ".apply-reset-button button")
+    press("Enter")
+    wait_status(lab, lambda s: s["settings"]["particles"] == 20 and s["settings"]["seed"] == 2 and s["time"] < 10)
+
+    # the view
+    focus(page, ".color-select select")
+    press("ArrowDown")
+    expect(page.locator(".legend")).not_to_contain_text("rotation angle")
+    type_in(".watch-input", "0 1")
+    focus(page, ".watch-button button")
+    press("Enter")
+    expect(page.locator(".note-watch")).to_be_visible()
+
+    # the files: save, then replay it, record a movie
+    type_in(".frames-input", "20")
+    wait_status(lab, lambda s: s["settings"]["frames_per_cycle"] == 20.0)
+    type_in(".save-name", "keys.h5")
+    focus(page, ".save-button button")
+    press("Enter")
+    wait_status(lab, lambda s: (lab["data"] / "keys.h5").exists() and not s["jobs"], timeout=60)
+    type_in(".record-name", "keys.gif")
+    type_in(".record-seconds", "5")
+    focus(page, ".record-button button")
+    press("Enter")
+    wait_status(lab, lambda s: (lab["data"] / "keys.gif").exists() and not s["jobs"], timeout=120)
+    focus(page, ".load-select select")
+    page.wait_for_timeout(1500)  # the list of saved runs is refreshed
+    press("ArrowDown")
+    focus(page, ".load-button button")
+    press("Enter")
+    wait_status(lab, lambda s: s.get("replay") is not None, timeout=60)
+    focus(page, ".preset-select select")
+    press("ArrowUp")
+    wait_status(lab, lambda s: s.get("replay") is None)
+
+    # the panes on the right, and back to the preset's own settings
+    focus(page, ".pane-choice button")
+    press("Tab")
+    press("Tab")
+    press("Tab")
+    press("Enter")
+    expect(page.locator(".lesson h2").first).to_be_visible()
+    context.close()
+
+
+def speed(s: dict) -> float:
+    value = s["settings"]["speed"]
+    return math.inf if value == "inf" else value

@@ -32,12 +32,15 @@ from granlab.engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis, lessons
 from .buffers import Cursor
+from .keyboard import Keyboard
 from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
 
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
+FOCUS_CSS = ":focus-visible, .noUi-handle:focus { outline: 3px solid #e65100 !important; outline-offset: 2px; }"
+"""Where the keyboard is, in every control: a thick orange ring, visible on a projector."""
 FRICTION_SLIDER_END = 1.0
 SPEED_NAMES = ("slow", "normal", "fast")
 """Each preset's named speeds (:attr:`granlab.engine.protocols.presets.Preset.speeds`), on buttons beside the slider."""
@@ -129,10 +132,14 @@ class Dashboard:
         self.readout = pn.pane.HTML("", css_classes=["readout"], styles={"flex": "0 1 auto", "min-width": "0"})
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
-            f'<iframe src="{scene_url}" title="3D scene" style="width:100%;height:100%;border:0"></iframe>',
+            f'<iframe src="{scene_url}" title="3D scene" tabindex="-1" style="width:100%;height:100%;border:0">'
+            '</iframe>',  # out of the Tab order: its viser panel would hold a keyboard user for a dozen stops
             sizing_mode="stretch_both", min_height=300, css_classes=["scene"])
         self.key_names: list[str] = []
         self.page = self._layout()
+        for widget in {id(w): w for root in (self.page, self.analysis_view, self.right, self.pane_choice)
+                       for w in root.select(pn.widgets.Widget)}.values():
+            widget.stylesheets = [*widget.stylesheets, FOCUS_CSS]
         if not viewer:
             self._open_link(query or {})
         self._refresh()
@@ -174,6 +181,8 @@ class Dashboard:
         self.named_speeds = {name: W.Button(name=name, css_classes=["named-speed", f"speed-{name}"], width=58,
                                             margin=(12, 1, 5, 1)) for name in SPEED_NAMES}
         self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 8))
+        self.keyboard = Keyboard(enabled=not self.viewer, css_classes=["keys"], width=80, height=31,
+                                 margin=(12, 4, 5, 4))
         # the link's query, which the button's script reads in the page (the clipboard is the page's)
         self.link_query = W.TextInput(value="{}", visible=False, width=10, css_classes=["link-query"])
         # a viewer is shown the speed as text: panel draws a disabled DiscreteSlider with its handle
@@ -227,10 +236,11 @@ class Dashboard:
                                     sizing_mode="stretch_width")
 
         self.preset.param.watch(lambda e: e.new in PRESETS and self._command("preset", name=e.new), "value")
-        self.play.on_click(lambda e: self._command("pause" if self.play.name == "Pause" else "play"))
+        self.play.on_click(lambda e: self._play_pause())
         self.step.on_click(lambda e: self._command("step"))
         self.reset.on_click(lambda e: self._command("reset"))
         self.defaults.on_click(lambda e: self._command("defaults"))
+        self.keyboard.param.watch(self._key, "action")
         for name, button in self.named_speeds.items():
             button.on_click(lambda e, name=name: self._control("speed", self._speeds().get(name, 1.0)))
         self.copy_link.js_on_click(args={"link": self.link_query}, code=COPY_LINK_JS)
@@ -261,6 +271,21 @@ class Dashboard:
         self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
                                                      seconds=self.record_seconds.value, color=self.scene.color_field))
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
+
+    def _key(self, event) -> None:
+        """A key of the page (:mod:`granlab.app.lab.keyboard`): what its button would do."""
+        action = event.new.split(":")[0]
+        if action == "play-pause":
+            self._play_pause()
+        elif action in ("step", "defaults"):
+            self._command(action)
+        elif action == "restart":
+            self._command("reset")
+
+    def _play_pause(self) -> None:
+        """Pause a running simulation, play a paused one: as it is now, not as the button last showed it."""
+        running = self.engine.status().get("state") in ("running", "stepping")
+        self._command("pause" if running else "play")
 
     def _speeds(self) -> dict[str, float]:
         """The named speeds of the preset shown (of the replayed run's preset in a replay)."""
@@ -666,8 +691,8 @@ class Dashboard:
         title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
                  "runs it</div>" if self.viewer else "GranLab")
         # only what this tab shows: a hidden widget in a row still widens it
-        controls = ([self.speed_text] if self.viewer else
-                    [self.defaults, self.speed, *self.named_speeds.values(), self.copy_link])
+        controls = ([self.speed_text, self.keyboard] if self.viewer else
+                    [self.defaults, self.speed, *self.named_speeds.values(), self.copy_link, self.keyboard])
         header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
                                      width=105 + 95 * self.viewer),
                         self.preset, self.play, self.step, self.reset, *controls,
