@@ -4,6 +4,7 @@ values in effect (the lab's ``/status``) and the widgets showing them."""
 
 import json
 import math
+import re
 from urllib.parse import parse_qs, urlparse
 
 import pytest
@@ -352,3 +353,20 @@ def test_each_control_works_from_the_keyboard(browser, lab):
 def speed(s: dict) -> float:
     value = s["settings"]["speed"]
     return math.inf if value == "inf" else value
+
+
+def test_the_live_text_says_the_state_every_few_seconds_and_alerts_a_restart(page, lab):
+    open_dashboard(page, lab, "ratchet16")
+    wait_status(lab, lambda s: s["stage"] == "cycling" and s["cycle"] >= 5, timeout=90)
+    polite = page.locator(".live-text [role=status]")
+    assert polite.get_attribute("aria-live") == "polite"
+    expect(polite).to_contain_text("Ratcheting with 16 disks (ratcheting Figs. 1-4): cycling", timeout=10000)
+    s = status(lab)
+    for words in ("strain change per cycle", "packing fraction 0.78", "3.00 contacts per disk", "sliding",
+                  f"The scene shows {s['particles']} disks between 4 walls, each coloured by its rotation angle"):
+        expect(polite).to_contain_text(words)
+    # said again within a few seconds: the cycle it names moves on
+    said = re.search(r"cycle \d+;", polite.text_content()).group(0)
+    expect(polite).not_to_contain_text(said, timeout=15000)
+    page.locator(".reset-button button").click()
+    expect(page.locator(".live-text [role=alert]")).to_contain_text("starts from t = 0", timeout=10000)

@@ -479,3 +479,20 @@ def test_reset_settings_restarts_with_the_presets_own_values_and_a_link_sets_up_
     engine.submit("setup", name="block", changes={"friction": -1.0})
     wait(lambda: engine.messages.latest_seq > seq)
     assert last_message(engine, seq)[0][0] == "error" and engine.status()["settings"]["friction"] == 0.3
+
+
+def test_the_live_text_says_the_state_and_the_scene_in_words():
+    from granlab.app.lab.live import describe
+
+    status = {"title": "Compression of a gas", "stage": "equilibrated", "state": "paused", "time": 212.5,
+              "readout": {"phi": 0.8251, "z": 3.452, "sliding": 1}}
+    scene = {"disks": 300, "walls": 0, "cell": [1.0, 0.0, 0.0, 1.0], "color_field": "coordination", "contacts": 517,
+             "watched": 0}
+    assert describe(status, scene) == (
+        "Compression of a gas: equilibrated, paused, time 212.5; packing fraction 0.825; 3.45 contacts per disk; "
+        "1 contact sliding. The scene shows 300 disks in a periodic cell, each coloured by its number of contacts; "
+        "517 contacts drawn as lines as thick as their force.")
+    status = {"title": "Ratcheting", "stage": "cycling", "state": "running", "time": 96.8, "cycle": 7,
+              "strain": {"dgamma": 5.07e-8, "ratcheting": True}, "readout": {}}
+    assert describe(status, {"disks": 0}) == ("Ratcheting: cycling, running, time 96.8, cycle 7; strain change per "
+                                              "cycle 5.07×10⁻⁸, ratcheting.")

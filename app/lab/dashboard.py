@@ -33,6 +33,7 @@ from granlab.engine.protocols.settings import CONTROL_LABELS
 from . import analysis, lessons
 from .buffers import Cursor
 from .keyboard import Keyboard
+from .live import UPDATE_SECONDS, LiveText, describe
 from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
 
@@ -181,6 +182,9 @@ class Dashboard:
         self.named_speeds = {name: W.Button(name=name, css_classes=["named-speed", f"speed-{name}"], width=58,
                                             margin=(12, 1, 5, 1)) for name in SPEED_NAMES}
         self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 8))
+        self.live = LiveText(css_classes=["live-text"], width=1, height=1, margin=0)
+        self._live_said = -math.inf
+        self._live_run: tuple[str, float] | None = None  # (preset, time) at the last refresh
         self.keyboard = Keyboard(enabled=not self.viewer, css_classes=["keys"], width=80, height=31,
                                  margin=(12, 4, 5, 4))
         # the link's query, which the button's script reads in the page (the clipboard is the page's)
@@ -539,6 +543,7 @@ class Dashboard:
                                   f"<b>{_speed_label(self.speed.value)}</b></div>")
         self.frames_kept.name = f"Frames kept (replays, movies) per {unit.split()[-1].rstrip('s')}"
         self._show_speed_and_link(status)
+        self._say(status)
         readout = status.get("readout") or {}
         fit = status.get("strain") or {}
         parts = [f"<b>{status.get('stage', '')}</b>",
@@ -567,6 +572,20 @@ class Dashboard:
             self._legend_key = key
             self.legend.object = legend_html(self.scene.color_field, list(key[1]), *key[2:])
         self._show_replay(status)
+
+    def _say(self, status: dict) -> None:
+        """The live text: the state every few seconds, an alert when the run starts again."""
+        now = time.monotonic()
+        run = (status.get("preset", ""), float(status.get("time", 0.0)))
+        last = self._live_run or run
+        if status.get("replay") is None and (run[0] != last[0] or run[1] < last[1]):
+            self.live.alert = escape(f"{time.strftime('%H:%M:%S')}: {status.get('title', run[0])} starts from t = 0 "
+                                     f"({status.get('state', '')}).")
+            self._live_said = -math.inf
+        self._live_run = run
+        if now - self._live_said >= UPDATE_SECONDS:
+            self._live_said = now
+            self.live.polite = escape(describe(status, self.scene.state()))
 
     def _show_speed_and_link(self, status: dict) -> None:
         """The named speed in effect highlighted; the link's query kept for the Copy link button."""
@@ -686,8 +705,8 @@ class Dashboard:
             for widget in (self.preset, self.play, self.step, self.reset, self.apply_reset, self.color,
                            self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
                 widget.disabled = True
-        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, self.link_query, width=250,
-                            sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
+        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, self.link_query, self.live,
+                            width=250, sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
         title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
                  "runs it</div>" if self.viewer else "GranLab")
         # only what this tab shows: a hidden widget in a row still widens it
