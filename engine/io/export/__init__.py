@@ -31,8 +31,9 @@ class ExportFormat:
     """A format of ``granlab export``: its ``--format`` name; the module writing it, loaded on first
     use (so that listing the formats costs nothing), which defines ``files(out, stem, indices)``
     (what it writes) and ``write(frames, out, stem, indices)`` (the frames as :class:`_Frame`), and
-    may define ``check_room(run, out, indices)`` (called before anything is written); what it is,
-    in a line; the suffix of its ``--out`` file, "" for a folder."""
+    may define ``check_room(run, out, indices)`` (called before anything is written) and
+    ``read_run(run, indices)`` (what it needs of the run file beyond its frames, given to ``write``
+    as ``run=``); what it is, in a line; the suffix of its ``--out`` file, "" for a folder."""
 
     name: str
     module: str
@@ -49,6 +50,7 @@ EXPORT_FORMATS = {fmt.name: fmt for fmt in (
     ExportFormat("lammps", f"{__name__}.lammps", "LAMMPS, OVITO: a dump custom and a dump local of the contacts",
                  ".dump"),
     ExportFormat("h5md", f"{__name__}.h5md", "MDAnalysis: H5MD in a 3D box", ".h5md"),
+    ExportFormat("html", f"{__name__}.html", "a handout: one page replaying the run in a browser, offline", ".html"),
 )}
 """Every format of ``granlab export`` by name (iterating gives the names)."""
 
@@ -129,12 +131,13 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False,
             frames_read = reporting(frames_read, len(indices), progress)
         if hasattr(writer, "check_room"):
             writer.check_room(f, out, indices)
+        run = {"run": writer.read_run(f, indices)} if hasattr(writer, "read_run") else {}
         if suffix:
             with staged(out.parent, last=[out.name]) as folder:
-                writer.write(frames_read, folder / out.name, stem, indices)
+                writer.write(frames_read, folder / out.name, stem, indices, **run)
         else:
             with staged(out, last=[targets[0].name]) as folder:
-                writer.write(frames_read, folder, stem, indices)
+                writer.write(frames_read, folder, stem, indices, **run)
         if progress is not None:
             progress(len(indices), len(indices))
     return {"run_file": str(path), "format": fmt, "out": str(out), "files": [str(t) for t in targets],
