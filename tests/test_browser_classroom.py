@@ -14,7 +14,7 @@ from granlab.app.lab import lessons
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
 from tests.test_browser import browser_context_args, browser_type_launch_args  # noqa: F401 (Debian's Chromium)
-from tests.test_browser import http_status, lab_only, open_dashboard, status, wait_status
+from tests.test_browser import http_status, lab_only, model, open_dashboard, status, wait_model, wait_status
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ SIDEBAR = (("phase", "phase-slider"), ("amplitude", "amplitude-input"), ("pressu
            ("rolling_friction", "rolling-friction-input"), ("rolling_stiffness", "rolling-stiffness-input"),
            ("cohesion_force", "cohesion-force-input"), ("cohesion_range", "cohesion-range-input"),
            ("particles", "particles-input"), ("seed", "seed-input"), ("particles", "apply-reset-button"))
-FILES = ("color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button", "load-select",
+FILES = ("projector-toggle", "color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button", "load-select",
          "load-button", "record-name", "record-seconds", "record-button", "pane-choice")
 KNOWN = set(HEADER) | {css for _, css in SIDEBAR} | set(FILES)
 FOCUSED = """() => {
@@ -370,3 +370,22 @@ def test_the_live_text_says_the_state_every_few_seconds_and_alerts_a_restart(pag
     expect(polite).not_to_contain_text(said, timeout=15000)
     page.locator(".reset-button button").click()
     expect(page.locator(".live-text [role=alert]")).to_contain_text("starts from t = 0", timeout=10000)
+
+
+def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and_lines_thick(page, lab):
+    open_dashboard(page, lab, "ratchet16")
+    page.goto(lab["url"] + "?preset=ratchet16&profile=projector")
+    toggle = page.locator(".projector-toggle input")
+    expect(toggle).to_be_checked(timeout=60000)
+    wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
+    widths = ("m.renderers.map(r => r.glyph.line_width).map(w => typeof w == 'number' ? w : w && w.value)"
+              ".filter(w => typeof w == 'number')")
+    thick = model(page, "figure-coulomb-cone", widths)
+    assert model(page, "figure-coulomb-cone", "m.below[0].axis_label_text_font_size") == "17px"
+    assert json.loads(page.locator(".link-query input").input_value())["profile"] == "projector"
+    toggle.focus()
+    page.keyboard.press("Space")  # off, from the keyboard
+    wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '14px'")
+    thin = model(page, "figure-coulomb-cone", widths)
+    assert thick == [2 * width for width in thin] and max(thin) > 0
+    assert "profile" not in json.loads(page.locator(".link-query input").input_value())

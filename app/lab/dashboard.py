@@ -48,7 +48,7 @@ SPEED_NAMES = ("slow", "normal", "fast")
 COPY_LINK_JS = """
 const page = new URLSearchParams(window.location.search)
 const query = new URLSearchParams(JSON.parse(link.value))
-for (const key of ["token", "profile"]) { if (page.get(key)) query.set(key, page.get(key)) }
+if (page.get("token")) query.set("token", page.get("token"))
 const url = window.location.origin + window.location.pathname + "?" + query.toString()
 if (navigator.clipboard) {
   navigator.clipboard.writeText(url).catch(() => window.prompt("Copy this link:", url))
@@ -141,6 +141,7 @@ class Dashboard:
         for widget in {id(w): w for root in (self.page, self.analysis_view, self.right, self.pane_choice)
                        for w in root.select(pn.widgets.Widget)}.values():
             widget.stylesheets = [*widget.stylesheets, FOCUS_CSS]
+        self.projector.value = (query or {}).get("profile") == "projector"
         if not viewer:
             self._open_link(query or {})
         self._refresh()
@@ -218,6 +219,7 @@ class Dashboard:
         self.cancel_pending = W.Button(name="Cancel the waiting changes", css_classes=["cancel-pending-button"],
                                        visible=False, **wide)
         self.fit_now = W.Button(name="Fit the strain from the next cycle", css_classes=["fit-now-button"], **wide)
+        self.projector = W.Checkbox(name="Projector: large text, thick lines", css_classes=["projector-toggle"])
         self.color = W.Select(name="Colour disks by", options=list(COLOR_FIELDS), value=self.scene.color_field,
                               css_classes=["color-select"], **wide)
         self.watch = W.TextInput(name="Watch a contact: disks i j (or click a disk)", placeholder="e.g. 3 7",
@@ -269,6 +271,7 @@ class Dashboard:
         self.apply_reset.on_click(lambda e: self._command("apply", changes={"particles": self.particles.value,
                                                                              "seed": self.seed.value}))
         self.color.param.watch(self._color, "value")
+        self.projector.param.watch(lambda e: self._set_projector(), "value")
         self.watch_button.on_click(self._watch)
         self.save.on_click(lambda e: self._command("save", name=self.save_name.value.strip()))
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
@@ -285,6 +288,13 @@ class Dashboard:
             self._command(action)
         elif action == "restart":
             self._command("reset")
+
+    def _set_projector(self) -> None:
+        """This tab's profile: the projector's (large text, thick lines) or the screen's."""
+        for plot in self.plots.values():
+            plot.set_projector(self.projector.value)
+        self._legend_key = None
+        self._settings_shown = None  # the link says the profile too
 
     def _play_pause(self) -> None:
         """Pause a running simulation, play a paused one: as it is now, not as the button last showed it."""
@@ -382,6 +392,7 @@ class Dashboard:
             plot = self.plots.get(key)
             if plot is None:  # a plot of the same name may read other columns in another preset
                 plot = self.plots[key] = make_plot(name, time_label, columns, reference_cycle)
+                plot.set_projector(self.projector.value)
             plot.clear()
             for series in plot.reads:
                 self.cursors[series] = Cursor()
@@ -563,14 +574,16 @@ class Dashboard:
         if state == "running":
             parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
         parts += [f"<span style='color:#8a5a00'>{escape(job)}</span>" for job in self._show_jobs(status.get("jobs", []))]
-        self.readout.object = ("<div style='font-size:14px;line-height:1.3;padding:2px 0 0 10px;white-space:nowrap'>" +
-                               " · ".join(p for p in parts if p) + "</div>")
+        size = 16 if self.projector.value else 14  # 16 px: the most the strip's 26 px hold
+        self.readout.object = (f"<div style='font-size:{size}px;line-height:1.3;padding:2px 0 0 10px;"
+                               "white-space:nowrap'>" + " · ".join(p for p in parts if p) + "</div>")
         scene = self.scene.state()
         key = (self.scene.color_field, tuple(status.get("watched_labels") or ()), scene.get("walls", 0) > 0,
-               scene.get("cell") is not None, scene.get("mechanism", False))
+               scene.get("cell") is not None, scene.get("mechanism", False), self.projector.value)
         if key != self._legend_key:
             self._legend_key = key
-            self.legend.object = legend_html(self.scene.color_field, list(key[1]), *key[2:])
+            legend = legend_html(self.scene.color_field, list(key[1]), *key[2:5])
+            self.legend.object = f"<div style='zoom:1.2'>{legend}</div>" if self.projector.value else legend
         self._show_replay(status)
 
     def _say(self, status: dict) -> None:
@@ -593,7 +606,8 @@ class Dashboard:
         speed = math.inf if speed == "inf" else speed
         for name, button in self.named_speeds.items():
             button.button_type = "primary" if self._speeds().get(name) == speed else "default"
-        link = json.dumps(status.get("link") or {"preset": status.get("preset", "ratchet")})
+        link = json.dumps({**(status.get("link") or {"preset": status.get("preset", "ratchet")}),
+                           **({"profile": "projector"} if self.projector.value else {})})
         if self.link_query.value != link:
             self.link_query.value = link
 
@@ -691,7 +705,7 @@ class Dashboard:
                        sample: {"particles", "seed"}}
         self.no_controls = pn.pane.HTML("<i>This preset has no live controls: only its speed.</i>",
                                         sizing_mode="stretch_width")
-        view = pn.Column(pn.pane.HTML("<b>View</b>"), self.color, self.watch, self.watch_button,
+        view = pn.Column(pn.pane.HTML("<b>View</b>"), self.projector, self.color, self.watch, self.watch_button,
                          self._note_pane("watch"), sizing_mode="stretch_width")
         files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"),
                           *labelled(self.frames_kept, "frames_per_cycle"), self.save_name, self.save,
