@@ -137,7 +137,7 @@ SIDEBAR = (("phase", "phase-slider"), ("amplitude", "amplitude-input"), ("pressu
            ("cohesion_force", "cohesion-force-input"), ("cohesion_range", "cohesion-range-input"),
            ("particles", "particles-input"), ("seed", "seed-input"), ("particles", "apply-reset-button"))
 FILES = ("projector-toggle", "color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button", "load-select",
-         "load-button", "record-name", "record-seconds", "record-button", "pane-choice")
+         "load-button", "handout-button", "record-name", "record-seconds", "record-button", "pane-choice")
 KNOWN = set(HEADER) | {css for _, css in SIDEBAR} | set(FILES)
 FOCUSED = """() => {
   let el = document.activeElement
@@ -241,7 +241,7 @@ def test_each_control_works_from_the_keyboard(browser, lab):
     wait_status(lab, lambda s: s["state"] == "running")
     focus(page, ".step-button button")
     press("Enter")
-    wait_status(lab, lambda s: s["state"] in ("paused", "stepping"))
+    wait_status(lab, lambda s: s["state"] == "paused")  # the step done (Play while it goes would stop it)
     focus(page, ".play-button button")
     press("Enter")
     for name in ("fast", "slow", "normal"):
@@ -333,6 +333,10 @@ def test_each_control_works_from_the_keyboard(browser, lab):
     focus(page, ".load-select select")
     page.wait_for_timeout(1500)  # the list of saved runs is refreshed
     press("ArrowDown")
+    focus(page, ".handout-button button")
+    press("Enter")
+    wait_status(lab, lambda s: (lab["data"] / "keys.html").exists() and not s["jobs"], timeout=120)
+    expect(page.locator(".note-handout")).to_contain_text("wrote keys.html")
     focus(page, ".load-button button")
     press("Enter")
     wait_status(lab, lambda s: s.get("replay") is not None, timeout=60)

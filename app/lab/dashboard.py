@@ -59,7 +59,7 @@ if (navigator.clipboard) {
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
-JOB_KINDS = ("save", "load", "record")
+JOB_KINDS = ("save", "load", "handout", "record")
 """The file jobs, each shown beside its button while it runs (:mod:`granlab.app.lab.jobs`)."""
 PANES = ("Key plots", "More plots", "About", "Lesson", "Analysis")
 HEADER_HEIGHT = 58
@@ -230,6 +230,7 @@ class Dashboard:
         self.load_name = W.Select(name="Replay a saved run", options=self.engine.saved_files(),
                                   css_classes=["load-select"], **wide)
         self.load = W.Button(name="Load and replay", css_classes=["load-button"], **wide)
+        self.handout = W.Button(name="Handout: one HTML page of it", css_classes=["handout-button"], **wide)
         self.frames_kept = W.FloatInput(name="Frames kept (replays, movies) per cycle", value=10.0, step=1.0,
                                         start=0.0, css_classes=["frames-input"], **wide)
         self.record_name = W.TextInput(name="Movie of the recent frames", placeholder="movie1.gif or .mp4",
@@ -275,6 +276,7 @@ class Dashboard:
         self.watch_button.on_click(self._watch)
         self.save.on_click(lambda e: self._command("save", name=self.save_name.value.strip()))
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
+        self.handout.on_click(lambda e: self._command("handout", name=self.load_name.value or ""))
         self.record.on_click(lambda e: self._command("record", name=self.record_name.value.strip(),
                                                      seconds=self.record_seconds.value, color=self.scene.color_field))
         self.timeline.param.watch(lambda e: self._command("seek", index=int(e.new) - 1), "value_throttled")
@@ -710,7 +712,8 @@ class Dashboard:
         files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"),
                           *labelled(self.frames_kept, "frames_per_cycle"), self.save_name, self.save,
                           self.job_rows["save"], self._note_pane("save"), self.load_name, self.load,
-                          self.job_rows["load"], self._note_pane("load"), self.record_name, self.record_seconds,
+                          self.job_rows["load"], self._note_pane("load"), self.handout,
+                          self.job_rows["handout"], self._note_pane("handout"), self.record_name, self.record_seconds,
                           self.record, self.job_rows["record"], self._note_pane("record"),
                           sizing_mode="stretch_width")
         if self.viewer:

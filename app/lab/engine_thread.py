@@ -45,7 +45,7 @@ from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
 from ..media.drawing import COLOR_FIELDS, frame_caption
 from .jobs import JobOutcome, Jobs
-from .replay import Replay, read_replay, read_time_limit, write_lab_movie, write_run
+from .replay import Replay, read_replay, read_time_limit, write_handout, write_lab_movie, write_run
 
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 HISTORY_MIB = 64.0
@@ -226,7 +226,7 @@ class LabEngine:
 
     def _execute(self, command: str, payload: dict, submitted: float) -> None:
         control = {"apply": next(iter(payload.get("changes", {})), ""), "watch": "watch", "watch_disk": "watch",
-                   "save": "save", "load": "load", "record": "record", "analyze": "analysis",
+                   "save": "save", "load": "load", "record": "record", "handout": "handout", "analyze": "analysis",
                    "preset": "preset", "setup": "preset", "seek": "replay",
                    "cancel": payload.get("kind", "run")}.get(command, "run")
         try:
@@ -282,6 +282,8 @@ class LabEngine:
                 self._save(payload["name"])
             elif command == "load":
                 self._load(payload["name"])
+            elif command == "handout":
+                self._handout(payload["name"])
             elif command == "record":
                 self._record(payload["name"], float(payload["seconds"]), payload.get("color", "rotation"))
             elif command == "analyze":
@@ -586,6 +588,18 @@ class LabEngine:
                                  (", ".join(self.saved_files()) or "none yet: save a run first") + ")")
         self.jobs.start("load", f"reading {path.name}", read_replay, (path,), time_limit=read_time_limit(path))
         self._info(f"reading {path.name}…", "load")
+
+    def _handout(self, name: str) -> None:
+        """Write the handout of a run file of the data folder, ``NAME.html`` beside it (or the first
+        free ``NAME-2.html`` ...: the lab never writes over a file), in a job."""
+        path = safe_path(self.data_dir, name)
+        if path.suffix != ".h5" or not path.is_file():
+            raise ParameterError("file name", name, "a GranLab run file (.h5) of the lab's data folder (" +
+                                 (", ".join(n for n in self.saved_files() if n.endswith(".h5")) or
+                                  "none yet: save a run first") + ")")
+        out = free_name(path.with_suffix(".html"))
+        self.jobs.start("handout", f"writing {out.name}", write_handout, (path, out))
+        self._info(f"writing the handout {out.name}…", "handout")
 
     def _record(self, name: str, seconds: float, color: str = "rotation") -> None:
         """Render the kept frames of the last ``seconds`` of simulated time into a movie in the

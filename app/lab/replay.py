@@ -227,6 +227,16 @@ def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol:
     return f"saved {len(frames)} frames (t = {frames[0][0].time:.4g} to {frames[-1][0].time:.4g}) to {path.name}"
 
 
+def write_handout(report, run: Path, out: Path) -> str:
+    """The handout of the run file ``run`` (the job of "Handout"): one HTML page ``out`` that replays it
+    from disk, without a server (:mod:`granlab.engine.io.export.html`)."""
+    from granlab.engine.io.export import export_run
+
+    result = export_run(run, "html", out, progress=lambda done, total: report(done / max(total, 1)))
+    return (f"wrote {out.name}: {len(result['indices'])} frames, {out.stat().st_size / 1e6:.1f} MB, one page that "
+            f"opens from disk in any browser")
+
+
 def write_lab_movie(report, path: Path, frames: list, color: str, watched: list, labels: list[str],
                     groups: list) -> str:
     """Render (FrameData, caption) pairs into the movie ``path`` (the job of "Record movie"),
