@@ -136,8 +136,8 @@ SIDEBAR = (("phase", "phase-slider"), ("amplitude", "amplitude-input"), ("pressu
            ("rolling_friction", "rolling-friction-input"), ("rolling_stiffness", "rolling-stiffness-input"),
            ("cohesion_force", "cohesion-force-input"), ("cohesion_range", "cohesion-range-input"),
            ("particles", "particles-input"), ("seed", "seed-input"), ("particles", "apply-reset-button"))
-FILES = ("projector-toggle", "color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button", "load-select",
-         "load-button", "handout-button", "record-name", "record-seconds", "record-button", "pane-choice")
+FILES = ("projector-toggle", "color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button",
+         "load-select", "load-button", "handout-button", "record-name", "record-seconds", "record-button", "pane-choice")
 KNOWN = set(HEADER) | {css for _, css in SIDEBAR} | set(FILES)
 FOCUSED = """() => {
   let el = document.activeElement

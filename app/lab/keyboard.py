@@ -63,7 +63,10 @@ window.__granlabKeys = (event) => {
   // Space on Play/Pause too: a button clicks on Space's release, which may find it drawn anew
   if (event.code === "Space" && (!button || play)) { event.preventDefault(); send("play-pause") }
   else if (event.key === "ArrowRight" && !event.altKey && !button) { event.preventDefault(); send("step") }
-  else if (event.altKey && event.code === "KeyR") { event.preventDefault(); send(event.shiftKey ? "defaults" : "restart") }
+  else if (event.altKey && event.code === "KeyR") {
+    event.preventDefault()
+    send(event.shiftKey ? "defaults" : "restart")
+  }
 }
 window.addEventListener("keydown", window.__granlabKeys, true)
 // bokeh draws a button anew when its label or colour changes ("Pause" -> "Play", the named speed in
