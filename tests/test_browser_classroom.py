@@ -393,3 +393,49 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     thin = model(page, "figure-coulomb-cone", widths)
     assert thick == [2 * width for width in thin] and max(thin) > 0
     assert "profile" not in json.loads(page.locator(".link-query input").input_value())
+
+
+@pytest.fixture(scope="module")
+def token_lab(tmp_path_factory):
+    process, url, viewer = spawn(tmp_path_factory.mktemp("classroom-token-lab"), "--tokens", "--preset", "ratchet16")
+    yield {"url": url, "viewer": viewer, "process": process}
+    process.terminate()
+    process.wait(timeout=30)
+
+
+BOXES = """() => {
+  const find = (root, css) => { for (const el of root.querySelectorAll("*")) {
+      if (el.classList && el.classList.contains(css)) return el
+      if (el.shadowRoot) { const found = find(el.shadowRoot, css); if (found) return found } } return null }
+  const box = (css) => { const el = find(document, css); if (el == null) return null
+      const r = el.getBoundingClientRect(); return {left: r.left, right: r.right, top: r.top + scrollY,
+      bottom: r.bottom + scrollY, width: r.width, height: r.height} }
+  const figure = (name) => { const m = Bokeh.documents[0].get_model_by_name(name)
+      const view = Bokeh.index.query_one((v) => v.model === m); const r = view.el.getBoundingClientRect()
+      return {left: r.left, right: r.right, top: r.top + scrollY, width: r.width, height: r.height} }
+  return {page: document.documentElement.scrollWidth, scene: box("scene"), legend: box("legend"),
+          readout: box("readout"), panes: box("pane-choice"), plot: figure("figure-strain-per-cycle"),
+          controls: box("controls")}
+}"""
+
+
+@pytest.mark.parametrize("screen, width, height", [("tablet", 1024, 768), ("phone", 390, 844)])
+def test_a_viewers_tablet_or_phone_shows_the_scene_above_the_key_plots_within_the_screen(browser, token_lab, screen,
+                                                                                        width, height):
+    context = browser.new_context(viewport={"width": width, "height": height}, has_touch=True,
+                                  is_mobile=screen == "phone")
+    page = context.new_page()
+    lab_only(page, token_lab)
+    page.goto(token_lab["viewer"])
+    expect(page.locator(".viewer-badge")).to_contain_text("viewer", timeout=60000)
+    wait_model(page, "strain-cycles", "m.data.cycle.length >= 1", timeout=120000)
+    boxes = page.evaluate(BOXES)
+    assert boxes["page"] <= width, boxes  # nothing to scroll sideways
+    for name in ("scene", "legend", "readout", "panes", "plot"):
+        assert 0 <= boxes[name]["left"] and boxes[name]["right"] <= width + 0.5, (name, boxes[name])
+    assert boxes["controls"] is None or boxes["controls"]["width"] == 0  # a viewer's disabled controls go
+    assert boxes["scene"]["height"] >= 0.4 * height and boxes["scene"]["width"] >= 0.9 * width - 20
+    assert boxes["scene"]["top"] < boxes["legend"]["top"] < boxes["panes"]["top"] < boxes["plot"]["top"]
+    assert boxes["plot"]["width"] >= 0.9 * width - 20 and boxes["plot"]["height"] >= 250
+    expect(page.locator(".speed-text")).to_be_visible()
+    context.close()

@@ -42,6 +42,22 @@ PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
 FOCUS_CSS = ":focus-visible, .noUi-handle:focus { outline: 3px solid #e65100 !important; outline-offset: 2px; }"
 """Where the keyboard is, in every control: a thick orange ring, visible on a projector."""
+NARROW = "@media (max-width: 1100px)"
+"""Narrower than this (a tablet held either way, a phone), a viewer's page stacks the scene above the key plots."""
+NARROW_PAGE_CSS = NARROW + """ {
+  :host { height: auto !important; min-height: 100vh; min-width: 0 !important; }
+  .header { height: auto !important; flex: none !important; flex-wrap: wrap !important; min-width: 0 !important; }
+  .readout-row { height: auto !important; flex: none !important; min-width: 0 !important; }
+  .body { height: auto !important; flex-direction: column !important; min-width: 0 !important; }
+}"""
+"""(panel gives a row the sum of its children's widths as its min-width: here they wrap instead)"""
+NARROW_HEADER_CSS = NARROW + " { .play-button, .step-button, .reset-button, .keys { display: none !important; } }"
+"""(a viewer's buttons are disabled: on a small screen they go)"""
+NARROW_BODY_CSS = NARROW + """ {
+  .controls { display: none !important; }
+  .centre { width: auto !important; min-width: 0 !important; height: 60vh !important; flex: none !important; }
+  .right { width: auto !important; height: 90vh !important; flex: none !important; }
+}"""
 FRICTION_SLIDER_END = 1.0
 SPEED_NAMES = ("slow", "normal", "fast")
 """Each preset's named speeds (:attr:`granlab.engine.protocols.presets.Preset.speeds`), on buttons beside the slider."""
@@ -130,7 +146,9 @@ class Dashboard:
         self.about = pn.Column(self.teaching, sizing_mode="stretch_both", scroll=True)
         self.lesson = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["lesson"])
         self.lesson_view = pn.Column(self.lesson, sizing_mode="stretch_both", scroll=True)
-        self.readout = pn.pane.HTML("", css_classes=["readout"], styles={"flex": "0 1 auto", "min-width": "0"})
+        self.readout = pn.pane.HTML("", css_classes=["readout"], styles={"flex": "0 1 auto", "min-width": "0"},
+                                    stylesheets=[NARROW + " { div { white-space: normal !important; } }"]
+                                    if viewer else [])
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
             f'<iframe src="{scene_url}" title="3D scene" tabindex="-1" style="width:100%;height:100%;border:0">'
@@ -732,18 +750,24 @@ class Dashboard:
         header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
                                      width=105 + 95 * self.viewer),
                         self.preset, self.play, self.step, self.reset, *controls,
-                        height=HEADER_HEIGHT, sizing_mode="stretch_width", styles={"overflow": "hidden"})
+                        height=HEADER_HEIGHT, sizing_mode="stretch_width", styles={"overflow": "hidden"},
+                        css_classes=["header"], stylesheets=[NARROW_HEADER_CSS] if self.viewer else [])
         # the readout on a line of its own, of fixed height: nothing below it moves as it changes; the
         # header's messages at its right end, beside the buttons that cause them
         notes = pn.Column(*(self._note_pane(key) for key in HEADER_NOTES), sizing_mode="stretch_width",
                           margin=(5, 0, 0, 0), styles={"flex": "1 1 0", "min-width": "0", "overflow": "hidden"})
         readout = pn.Row(self.readout, notes, height=26, sizing_mode="stretch_width", margin=0,
-                         styles={"border-bottom": "1px solid #ddd", "background": "#f6f7f9", "overflow": "hidden"})
+                         styles={"border-bottom": "1px solid #ddd", "background": "#f6f7f9", "overflow": "hidden"},
+                         css_classes=["readout-row"])
         self.timeline_label = pn.pane.HTML("", width=220)
         self.timeline_row = pn.Row(self.timeline, self.timeline_label, self._note_pane("replay"),
                                    sizing_mode="stretch_width", visible=False, css_classes=["timeline"])
         # at least 600 px: narrower, viser lays its control panel over the scene as a bottom sheet
         centre = pn.Column(self.scene_pane, self.legend, self.timeline_row, sizing_mode="stretch_both", min_width=600,
-                           styles={"flex": "1.25 1 0"})
-        body = pn.Row(sidebar, centre, self.right, sizing_mode="stretch_both")
-        return pn.Column(header, readout, body, sizing_mode="stretch_both")
+                           styles={"flex": "1.25 1 0"}, css_classes=["centre"])
+        self.right.css_classes = ["right"]
+        # a viewer's tablet or phone: the scene, then the key plots, one above the other
+        narrow = [NARROW_PAGE_CSS] if self.viewer else []
+        body = pn.Row(sidebar, centre, self.right, sizing_mode="stretch_both", css_classes=["body"],
+                      stylesheets=[NARROW_BODY_CSS] if self.viewer else [])
+        return pn.Column(header, readout, body, sizing_mode="stretch_both", stylesheets=narrow)

@@ -41,7 +41,7 @@ from tornado.iostream import StreamClosedError
 from bokeh.protocol.exceptions import ProtocolError
 from bokeh.server.auth_provider import AuthProvider
 from bokeh.settings import settings as bokeh_settings
-from panel.io.resources import LOCAL_DIST
+from panel.io.resources import LOCAL_DIST, _env
 from websockets.http11 import Request
 
 from granlab.engine.errors import GranLabError
@@ -65,6 +65,9 @@ M_ARENA_MAX = -8
 # the frames kept for saves and movies may take at most half this machine's memory
 MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
 TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
+# a phone lays the page out at its own width (without this, as a 980-pixel desktop page shrunk)
+PAGE_TEMPLATE = _env.from_string('{% extends base %}{% block preamble %}{{ super() }}'
+                                 '<meta name="viewport" content="width=device-width, initial-scale=1">{% endblock %}')
 COOKIE = "granlab-token"
 LOCKED_PAGE = ("<!doctype html><title>GranLab</title><body style='font:20px sans-serif;margin:3em'>"
                "<h1>GranLab</h1><p>This lab is served with tokens: open the full address the presenter gave, "
@@ -195,6 +198,7 @@ class Lab:
         # finds that session discarded and gets a new document, never rendered, whose every stylesheet
         # would come from cdn.holoviz.org (LOCAL_DIST is relative to "/", where the dashboard is served)
         pn.state.curdoc.template_variables["dist_url"] = LOCAL_DIST
+        pn.state.curdoc.template = PAGE_TEMPLATE
         self.engine.tabs += 1
         self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)
