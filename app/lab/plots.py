@@ -361,7 +361,9 @@ class LoadStrainPlot(LivePlot):
         super().__init__(name, fig)
         self.source = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": [], "cycle": []}, name="q-gamma-path")
         self.sources = [self.source]
-        palette = list(reversed(Blues256[:200]))
+        # the lighter quarter of Blues256 left out: the first cycle shown stays apart from the grey of older ones,
+        # and the quarters of the scale apart, also for a protanope (tests/test_colour_vision.py)
+        palette = list(reversed(Blues256[:160]))
         self.mapper = LinearColorMapper(palette=palette, low=0, high=1, low_color="#dddddd")
         fig.segment("x0", "y0", "x1", "y1", source=self.source, line_width=2,
                     color={"field": "cycle", "transform": self.mapper})
@@ -517,8 +519,8 @@ MODEL_STYLES = model_styles(TANGENTIAL)
 
 LINES = {
     "energy": {"title": "Energy budget", "series": "time", "y": "energy (paper units)",
-               "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
-                         ("t", "dissipated", "dissipated", "#d62728"),
+               "lines": [("t", "kinetic", "kinetic", "#0072b2"), ("t", "stored", "stored in springs", "#009e73"),
+                         ("t", "dissipated", "dissipated", "#d55e00"),
                          ("t", "balance", "balance (should stay 0)", "#000000")]},
     "coordination": {"title": "Coordination number z = 2M/N", "series": "time", "y": "z (contacts per disk)",
                      "lines": [("t", "z", "z", "#1f77b4")]},
@@ -543,8 +545,8 @@ LINES = {
                 "lines": [("t", "kinetic", "", "#1f77b4")], "options": {"y_axis_type": "log"}},
     "replay-energy": {"title": "Energy budget of the replayed run", "series": "replay", "y": "energy (paper units)",
                       "columns": ("t", "step", "kinetic", "stored", "dissipated", "balance"),
-                      "lines": [("t", "kinetic", "kinetic", "#1f77b4"), ("t", "stored", "stored in springs", "#2ca02c"),
-                                ("t", "dissipated", "dissipated", "#d62728"), ("t", "balance", "balance", "#000000")]},
+                      "lines": [("t", "kinetic", "kinetic", "#0072b2"), ("t", "stored", "stored in springs", "#009e73"),
+                                ("t", "dissipated", "dissipated", "#d55e00"), ("t", "balance", "balance", "#000000")]},
     "replay-structure": {"title": "Coordination of the replayed packing", "series": "replay", "x": "frame",
                          "y": "z (contacts per disk)", "columns": ("t", "step", "frame", "z", "phi"),
                          "lines": [("frame", "z", "z", "#1f77b4")]},

@@ -29,24 +29,30 @@ WATCHED_THICKNESS = 0.3
 """Thickness of a watched contact's line, as a fraction of the mean radius: drawn over the force
 network, on a strong force's line it is its coloured core."""
 
-COMPRESSIVE_COLOR = (175, 25, 25)
-TENSILE_COLOR = (30, 90, 220)
-SLIDING_CONTACT_COLOR = (245, 160, 0)
+# The lines drawn over the packing, told apart by everyone (tests/test_colour_vision.py): the
+# contact kinds, the watched contacts (WATCHED_COLORS) and the mechanism's arrows are Okabe–Ito's
+# and Paul Tol's colours, each moved by at most 7 ΔE2000 so that any two of them, or one of them and
+# the walls, the cell or the spokes, differ by ΔE2000 >= 11.9 also as protanopes, deuteranopes and
+# tritanopes see them (the walls and the spokes, greys, by 11.1).
+COMPRESSIVE_COLOR = (184, 9, 1)
+TENSILE_COLOR = (1, 102, 201)
+SLIDING_CONTACT_COLOR = (240, 176, 46)
 SPOKE_COLOR = (25, 25, 25)
 WALL_COLOR = (60, 60, 60)
-CELL_COLOR = (110, 110, 170)
-MECHANISM_COLOR = (0, 150, 60)
+CELL_COLOR = (68, 71, 71)
+MECHANISM_COLOR = (190, 115, 148)
 CONTACT_KINDS = (("compressive", COMPRESSIVE_COLOR), ("tensile (cohesion)", TENSILE_COLOR),
                  ("sliding", SLIDING_CONTACT_COLOR))
 """Name and colour of each contact kind of :attr:`granlab.engine.frames.SceneFrame.contact_kind` (0, 1, 2)."""
 
 WATCHED_COLORS = np.array(
-    [(230, 0, 140), (0, 150, 80), (0, 150, 200), (120, 60, 190), (140, 90, 40), (150, 150, 0), (90, 90, 90),
-     (0, 90, 110)],
+    [(251, 77, 114), (38, 146, 102), (2, 178, 255), (79, 14, 160), (145, 136, 0), (149, 74, 124), (15, 108, 67),
+     (146, 170, 196)],
     dtype=np.uint8,
 )
 """Colour of the k-th watched contact (cycled): the same in the scene and in the Coulomb-cone
-plot, so a path on the plot can be found in the packing. None of them is a contact kind's."""
+plot, so a path on the plot can be found in the packing. None of them is a contact kind's; none
+is lighter than L* = 70, so that a path shows on the plot's white."""
 
 STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("slides, +μ side", "#f59b00"),
                  STATUS_SLIDE_NEG: ("slides, −μ side", "#b35a00"),
@@ -56,16 +62,17 @@ STATUS_LEGEND = {STATUS_STICK: ("non-sliding", "#555555"), STATUS_SLIDE_POS: ("s
 COORDINATION_COLORS = np.array(
     [
         (200, 200, 200),  # 0 contacts: rattler
-        (250, 225, 120),  # 1
-        (250, 170, 80),  # 2
-        (225, 85, 60),  # 3
-        (160, 70, 160),  # 4
-        (70, 120, 200),  # 5
-        (60, 160, 90),  # 6 or more
+        (240, 228, 66),  # 1
+        (230, 159, 0),  # 2
+        (213, 94, 0),  # 3
+        (204, 121, 167),  # 4
+        (86, 180, 233),  # 5
+        (0, 158, 115),  # 6 or more
     ],
     dtype=np.uint8,
 )
-"""Colour of a disk with z contacts, z = 0..6 (6 stands for 6 or more)."""
+"""Colour of a disk with z contacts, z = 0..6 (6 stands for 6 or more): Okabe–Ito's colours, in
+the order of the hues before them (yellow, orange, red, purple, blue, green)."""
 
 SLIDING_DISK_COLORS = np.array([(170, 190, 215), (245, 140, 0)], dtype=np.uint8)
 """Colour of a disk without (row 0) and with (row 1) a sliding contact."""
@@ -84,10 +91,14 @@ def _lookup_table(anchors: list[tuple[int, int, int]], cyclic: bool) -> np.ndarr
 
 
 ROTATION_LUT = _lookup_table(
-    [(225, 95, 95), (220, 190, 70), (95, 190, 105), (70, 180, 210), (105, 110, 220), (205, 95, 195)],
+    [(209, 209, 209), (220, 181, 241), (192, 140, 224), (149, 114, 170), (114, 114, 114), (98, 138, 83),
+     (115, 176, 95), (164, 207, 148)],
     cyclic=True,
 )
-"""Cyclic map of theta: entry floor(256 theta / 2 pi) mod 256."""
+"""Cyclic map of theta: entry floor(256 theta / 2 pi) mod 256. A disk at rest is light grey, a
+turn anticlockwise makes it purple, clockwise green, half a turn dark grey: the anchors are
+L* = 66 + 18 cos theta, (a*, b*) = (35, -35) sin theta, a circle that each colour-vision
+deficiency sees as a loop (a rainbow does not: a deuteranope sees some angles a quarter turn apart alike)."""
 
 PRESSURE_LUT = _lookup_table(
     [(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
