@@ -39,21 +39,22 @@ PLOT_POINTS = 40_000
 
 # The lab's colours (granlab.app.media.drawing, which the engine may not import: it is the layer
 # above); tests/test_handout.py checks that they are the same.
-ROTATION_ANCHORS = [(225, 95, 95), (220, 190, 70), (95, 190, 105), (70, 180, 210), (105, 110, 220), (205, 95, 195)]
+ROTATION_ANCHORS = [(209, 209, 209), (220, 181, 241), (192, 140, 224), (149, 114, 170), (114, 114, 114), (98, 138, 83),
+                    (115, 176, 95), (164, 207, 148)]
 PRESSURE_ANCHORS = [(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141), (39, 173, 129),
                     (92, 200, 99), (170, 220, 50), (253, 231, 37)]
-COORDINATION_COLORS = [(200, 200, 200), (250, 225, 120), (250, 170, 80), (225, 85, 60), (160, 70, 160),
-                       (70, 120, 200), (60, 160, 90)]
+COORDINATION_COLORS = [(200, 200, 200), (240, 228, 66), (230, 159, 0), (213, 94, 0), (204, 121, 167),
+                       (86, 180, 233), (0, 158, 115)]
 SLIDING_DISK_COLORS = [(170, 190, 215), (245, 140, 0)]
-CONTACT_KINDS = [("compressive", (175, 25, 25)), ("tensile (cohesion)", (30, 90, 220)), ("sliding", (245, 160, 0))]
-WATCHED_COLORS = [(230, 0, 140), (0, 150, 80), (0, 150, 200), (120, 60, 190), (140, 90, 40), (150, 150, 0),
-                  (90, 90, 90), (0, 90, 110)]
-LINE_COLORS = {"spoke": (25, 25, 25), "wall": (60, 60, 60), "cell": (110, 110, 170), "edge": (70, 70, 70)}
+CONTACT_KINDS = [("compressive", (184, 9, 1)), ("tensile (cohesion)", (1, 102, 201)), ("sliding", (240, 176, 46))]
+WATCHED_COLORS = [(251, 77, 114), (38, 146, 102), (2, 178, 255), (79, 14, 160), (145, 136, 0), (149, 74, 124),
+                  (15, 108, 67), (146, 170, 196)]
+LINE_COLORS = {"spoke": (25, 25, 25), "wall": (60, 60, 60), "cell": (68, 71, 71), "edge": (70, 70, 70)}
 STATUS_MARKS = {STATUS_SLIDE_POS: ("slides, +μ side", "#f59b00", "up"),
                 STATUS_SLIDE_NEG: ("slides, −μ side", "#b35a00", "down")}
 FORCE_CLASSES = 5
 """Width classes of the force network, as the lab's: class k holds k/K <= |F|/max|F| < (k+1)/K."""
-CYCLE_SHADES = [(198, 219, 239), (107, 174, 214), (33, 113, 181), (8, 48, 107)]
+CYCLE_SHADES = [(157, 202, 225), (79, 155, 203), (25, 102, 173), (8, 48, 107)]
 """The q–γ path's colour from the first cycle (light) to the last (dark), as the lab's plot."""
 MODEL_STYLES = [("#d62728", ""), ("#1f77b4", ""), ("#2ca02c", "8 5"), ("#9467bd", "8 5")]
 """Colour and dash of each tangential model, in the order of the registry, as in the lab's plots: the
@@ -62,8 +63,8 @@ STRAIN_LABEL = "γ(N) − γ(N_ref)  (Eq. 2)"
 
 LINE_PLOTS = {
     "energy": ("Energy budget", "time", "energy (paper units)",
-               [("kinetic", "kinetic", "#1f77b4"), ("stored", "stored in springs", "#2ca02c"),
-                ("dissipated", "dissipated", "#d62728"), ("balance", "balance (should stay 0)", "#000000")]),
+               [("kinetic", "kinetic", "#0072b2"), ("stored", "stored in springs", "#009e73"),
+                ("dissipated", "dissipated", "#d55e00"), ("balance", "balance (should stay 0)", "#000000")]),
     "coordination": ("Coordination number z = 2M/N", "time", "z (contacts per disk)", [("z", "z", "#1f77b4")]),
     "coordination-gilabert": ("Coordination number z", "time", "z (contacts per disk)", [("z", "z", "#1f77b4")]),
     "solid-fraction": ("Solid fraction Φ", "time", "Φ (disk area / box area)", [("phi", "Φ", "#1f77b4")]),
