@@ -1,4 +1,8 @@
-"""Shared helpers: small packings built from the engine's own generators."""
+"""Shared helpers: small packings built from the engine's own generators, and the browser every
+browser test drives (Debian's Chromium at 1366×768, the smaller projector screen)."""
+
+import os
+import shutil
 
 import numpy as np
 import pytest
@@ -22,3 +26,24 @@ def periodic_gas(count=120, length=20.0, seed=1, speed=1.0, law=None, dt_safety=
 @pytest.fixture
 def gas_factory():
     return periodic_gas
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    """Debian's Chromium for playwright's ``browser`` and ``page`` (its own download is not
+    installed); without it a browser test skips, except under CI=true, where it is an error."""
+    if CHROMIUM is None:
+        if os.environ.get("CI") == "true":
+            raise RuntimeError("CI=true but no chromium on PATH: .ci/run installs Debian's chromium package")
+        pytest.skip("no chromium on PATH")
+    return {**browser_type_launch_args, "executable_path": CHROMIUM,
+            "args": ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+                     "--disable-sync", "--no-first-run"]}
+
+
+@pytest.fixture(scope="session")
+def browser_context_args(browser_context_args):
+    return {**browser_context_args, "viewport": {"width": 1366, "height": 768}}  # the smaller projector screen

@@ -31,18 +31,6 @@ if CHROMIUM is None:
     pytest.skip("no chromium on PATH", allow_module_level=True)
 
 
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    return {**browser_type_launch_args, "executable_path": CHROMIUM,
-            "args": ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                     "--disable-sync", "--no-first-run"]}
-
-
-@pytest.fixture(scope="session")
-def browser_context_args(browser_context_args):
-    return {**browser_context_args, "viewport": {"width": 1366, "height": 768}}  # the smaller projector screen
-
-
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
     data = tmp_path_factory.mktemp("lab-data")

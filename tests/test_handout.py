@@ -9,9 +9,7 @@ timeline that moves the scene and the plots' markers, text a projector shows.
 import base64
 import json
 import math
-import os
 import re
-import shutil
 import time
 
 import numpy as np
@@ -23,25 +21,8 @@ from granlab.engine.io import h5md
 from granlab.engine.io.export import EXPORT_FORMATS, export_run
 from granlab.engine.io.export import html as handout_format
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CYCLES = 4
 """Load cycles of the saved ratchet16 run: its strain per cycle is fitted from cycle 2 on, over three cycles."""
-
-
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    if CHROMIUM is None:
-        if os.environ.get("CI") == "true":
-            raise RuntimeError("CI=true but no chromium on PATH: .ci/run installs Debian's chromium package")
-        pytest.skip("no chromium on PATH")
-    return {**browser_type_launch_args, "executable_path": CHROMIUM,
-            "args": ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                     "--disable-sync", "--no-first-run"]}
-
-
-@pytest.fixture(scope="session")
-def browser_context_args(browser_context_args):
-    return {**browser_context_args, "viewport": {"width": 1366, "height": 768}}  # the smaller projector screen
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,6 @@ from __future__ import annotations
 import functools
 import math
 import re
-import shutil
 from collections import defaultdict
 
 import numpy as np
@@ -762,24 +761,16 @@ def test_the_standalone_page_asks_nothing_of_any_host(name):
     assert not re.search(r"(src|href)\s*=|url\(|@import|//", html.replace("</", ""))
 
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-@pytest.mark.skipif(CHROMIUM is None, reason="no chromium on PATH")
-def test_every_sheet_prints_on_one_a4_and_one_letter_page():
-    from playwright.sync_api import sync_playwright
-
+def test_every_sheet_prints_on_one_a4_and_one_letter_page(browser):
     requests = []
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox", "--disable-gpu"])
-        page = browser.new_page()
-        page.on("request", lambda request: requests.append(request.url))
-        for name in PRESETS:
-            page.set_content(lesson_html(lesson(name), standalone=True))
-            for paper in ("A4", "Letter"):
-                pdf = page.pdf(format=paper, print_background=True)
-                assert len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) == 1, (name, paper)
-        browser.close()
+    page = browser.new_page()
+    page.on("request", lambda request: requests.append(request.url))
+    for name in PRESETS:
+        page.set_content(lesson_html(lesson(name), standalone=True))
+        for paper in ("A4", "Letter"):
+            pdf = page.pdf(format=paper, print_background=True)
+            assert len(re.findall(rb"/Type\s*/Page\b(?!s)", pdf)) == 1, (name, paper)
+    page.close()
     assert requests == []
 
 
