@@ -62,7 +62,11 @@ def build_parser():
     bench.add_argument("--lab", action="store_true",
                        help="benchmark the lab instead: a served preset streaming to a headless Chromium tab")
     bench.add_argument("--seconds", type=float, default=20.0, help="length of each lab measurement (default 20 s)")
-    bench.add_argument("--tabs", type=int, default=100, help="tabs opened and closed by the lab benchmark (default 100)")
+    bench.add_argument("--tabs", type=int, default=100,
+                       help="tabs opened and closed by the lab benchmark (default 100)")
+    bench.add_argument("--viewers", type=int, metavar="N",
+                       help="with --lab: a classroom instead, one presenter and N viewers as light clients (nothing "
+                            "drawn) on the lab served with tokens, at 256 and 5600 disks (or --particles)")
     return parser
 
 
@@ -116,8 +120,10 @@ def main(argv: list[str] | None = None) -> int:
             serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
                   **changes)
             return 0
+        if args.command == "bench" and args.viewers is not None and not args.lab:
+            raise GranLabError("--viewers goes with --lab: granlab bench --lab --viewers N")
         if args.command == "bench" and args.lab:
-            from . import bench
+            from .lab import bench
 
             args.handler, args.printer = bench.handler, bench.print_result
     except GranLabError as error:

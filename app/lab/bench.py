@@ -15,12 +15,25 @@ samples have 5600) and one headless Chromium tab watches it. Measured:
   the server receiving it to the engine applying it;
 - the server's resident memory and thread count before and after ``tabs`` tabs are opened
   (dashboard loaded) and closed.
+
+``granlab bench --lab --viewers N``, a classroom: the lab served with tokens at 256 and 5600 disks
+to one presenter's page and N viewers' pages opened by light clients (:mod:`.classroom`: the
+pages' websockets, nothing drawn) in a process apart from the server. Measured: the scene
+frames and the messages and bytes each page receives per second on each websocket and where
+those bytes go (viewer 1's), the presenter's command latency (a change of the load's period sent
+through its page's bokeh websocket, to the value in ``/status``; and the changes lost), the
+engine's share of the preset run headless over the same simulated interval, and the server's
+resident memory.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -35,9 +48,21 @@ from .server import read_status as _status
 from .server import spawn
 
 TARGETS = {"engine_fraction": 0.5, "scene_fps": 20.0, "latency_ms": 200.0}
+CLASSROOM_TARGETS = {"frames_per_s": 10.0, "latency_ms": 200.0, "engine_share": 0.3, "mbit_per_s": 1.0}
+"""Issue 30's classroom of 30 on two cores: frames per second each viewer receives (at least),
+the presenter's median latency (below), the engine's share (at least), each viewer's
+megabits per second (at most; the issue sets it at 5600 disks)."""
+CLASSROOM_SIZES = (256, 5600)
+SCENE_UPDATE = "SceneNodeUpdateMessage /granlab/"  # most of the scene's keys: left out of the printed table
+CLASSROOM_WARMUP = 3.0  # seconds after the last page opened: each page's first messages are the whole scene
 
 
 def handler(args) -> dict:
+    if args.viewers is not None:
+        if args.viewers < 1 or args.seconds <= 0:
+            raise GranLabError(f"bench --lab --viewers takes --viewers >= 1 and --seconds > 0, not {args.viewers} and "
+                               f"{args.seconds}")
+        return classroom(args.viewers, args.seconds, args.particles)
     if args.particles is None:
         args.particles = 5600
     if args.particles < 1 or args.seconds <= 0 or args.tabs < 0:
@@ -122,7 +147,8 @@ def run(particles: int = 5600, seconds: float = 20.0, tabs: int = 100) -> dict:
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
-        raise GranLabError("bench --lab drives a browser with playwright: python -m pip install -e \".[test]\"") from None
+        raise GranLabError("bench --lab drives a browser with playwright: "
+                           "python -m pip install -e \".[test]\"") from None
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         raise GranLabError("bench --lab needs Chromium on PATH (Debian: apt-get install chromium)")
@@ -145,8 +171,8 @@ def run(particles: int = 5600, seconds: float = 20.0, tabs: int = 100) -> dict:
             _open(page, url)
             time.sleep(5.0)
             hidden = _rates(url, seconds)
-            result.update(hidden_particle_steps_per_s=hidden["particle_steps_per_s"], hidden_time_from=hidden["time_from"],
-                          hidden_time_to=hidden["time_to"])
+            result.update(hidden_particle_steps_per_s=hidden["particle_steps_per_s"],
+                          hidden_time_from=hidden["time_from"], hidden_time_to=hidden["time_to"])
             end_to_end, server = _latencies(page, url)
             page.close()
             result.update(latency_ms_median=statistics.median(end_to_end), latency_ms_max=max(end_to_end),
@@ -208,6 +234,9 @@ def _churn(browser, url: str, pid: int, tabs: int) -> dict:
 
 
 def print_result(r: dict) -> None:
+    if "runs" in r:
+        print_classroom(r)
+        return
     mark = {True: "ok", False: "BELOW TARGET"}
     print(f"lab benchmark, ratchet preset, {r['particles']} disks, one tab")
     print(f"  granlab bench (1 thread):  {r['bench_1_thread'] / 1e6:.2f} M particle-steps/s")
@@ -219,7 +248,8 @@ def print_result(r: dict) -> None:
           f"{r['headless_same_interval'] / 1e6:.2f} M; the lab ran at "
           f"{r['particle_steps_per_s'] / r['headless_same_interval']:.2f} of it")
     print(f"  engine, the tab's scene blocked: {r['hidden_particle_steps_per_s'] / 1e6:.2f} M particle-steps/s = "
-          f"{r['hidden_engine_fraction']:.2f} of bench; {r['hidden_particle_steps_per_s'] / r['hidden_headless_same_interval']:.2f}"
+          f"{r['hidden_engine_fraction']:.2f} of bench; "
+          f"{r['hidden_particle_steps_per_s'] / r['hidden_headless_same_interval']:.2f}"
           f" of the preset headless over its interval (t = {r['hidden_time_from']:.2f} to {r['hidden_time_to']:.2f})")
     print(f"  control, key press to /status (a tab without the scene): median {r['latency_ms_median']:.0f} ms, "
           f"max {r['latency_ms_max']:.0f} ms [{mark[r['pass']['latency']]}]")
@@ -231,3 +261,124 @@ def print_result(r: dict) -> None:
     print(f"  {r['tabs_opened']} tabs opened and closed ({r['tab_seconds']:.2f} s each): threads "
           f"{r['threads_before']} -> {r['threads_after']}, memory {r['memory_before_mib']:.0f} -> "
           f"{r['memory_after_mib']:.0f} MiB [{mark[r['pass']['tabs']]}]")
+
+
+def classroom(viewers: int, seconds: float = 20.0, particles: int | None = None) -> dict:
+    """One presenter and ``viewers`` viewers on the lab at ``particles`` disks (default: 256, then
+    5600), each measured over ``seconds``."""
+    runs = [_classroom_run(n, seconds, viewers) for n in ((particles,) if particles else CLASSROOM_SIZES)]
+    return {"viewers": viewers, "cores": os.cpu_count(), "targets": CLASSROOM_TARGETS, "runs": runs}
+
+
+def _spread(values: list[float]) -> dict:
+    return {"min": min(values), "median": statistics.median(values), "max": max(values)}
+
+
+def _classroom_run(particles: int, seconds: float, viewers: int) -> dict:
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as data, tempfile.TemporaryDirectory() as work:
+        process, presenter, viewer = spawn(data, "--tokens", "--particles", str(particles))
+        try:
+            idle = peak = resident_mib(process.pid)
+            spec, out, errors = Path(work, "spec.json"), Path(work, "result.json"), Path(work, "stderr")
+            spec.write_text(json.dumps({"presenter": presenter, "viewer": viewer, "viewers": viewers,
+                                        "seconds": seconds, "warmup": CLASSROOM_WARMUP, "server_pid": process.pid,
+                                        "out": str(out)}))
+            with errors.open("w") as stderr:
+                client = subprocess.Popen([sys.executable, "-m", "granlab.app.lab.classroom", str(spec)],
+                                          stdout=subprocess.DEVNULL, stderr=stderr)
+            deadline = time.time() + 120.0 * (viewers + 1) + seconds + 300.0
+            while client.poll() is None:
+                if time.time() > deadline:
+                    client.kill()
+                    raise GranLabError(f"the classroom's clients did not finish within {deadline:.0f} s")
+                peak = max(peak, resident_mib(process.pid))
+                time.sleep(0.5)
+            after = resident_mib(process.pid)
+            if client.returncode != 0:
+                raise GranLabError(f"the classroom's clients failed: {errors.read_text().strip()[-500:]}")
+            r = json.loads(out.read_text())
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+    r.update(particles=particles, viewers_asked=viewers, load_before=load, load_after=os.getloadavg()[0],
+             memory_idle_mib=idle, memory_peak_mib=peak, memory_after_mib=after)
+    r["headless_same_interval"] = headless_rate(particles, r["time_from"], r["time_to"])
+    r["engine_share"] = r["particle_steps_per_s"] / r["headless_same_interval"]
+    pages = r["viewers"]
+    r["anatomy"] = {socket: pages[0][socket].pop("anatomy") for socket in ("scene", "bokeh")}
+    r["per_viewer"] = {
+        "frames_per_s": _spread([v["scene"]["frames"] for v in pages]),
+        "scene_messages_per_s": _spread([v["scene"]["messages"] for v in pages]),
+        "scene_bytes_per_s": _spread([v["scene"]["bytes"] for v in pages]),
+        "bokeh_messages_per_s": _spread([v["bokeh"]["messages"] for v in pages]),
+        "bokeh_bytes_per_s": _spread([v["bokeh"]["bytes"] for v in pages]),
+        "mbit_per_s": _spread([8e-6 * (v["scene"]["bytes"] + v["bokeh"]["bytes"]) for v in pages])}
+    spread = r["per_viewer"]
+    r["pass"] = {"frames": spread["frames_per_s"]["min"] >= CLASSROOM_TARGETS["frames_per_s"],
+                 "latency": r["commands_lost"] == 0 and r["latency_ms_median"] < CLASSROOM_TARGETS["latency_ms"],
+                 "engine": r["engine_share"] >= CLASSROOM_TARGETS["engine_share"],
+                 "bandwidth": spread["mbit_per_s"]["max"] <= CLASSROOM_TARGETS["mbit_per_s"]}
+    return r
+
+
+def _latency(run: dict, key: str) -> str:
+    times = run[key]
+    shown = f"{statistics.median(times):.0f} / {max(times):.0f}" if times else "-"
+    return shown + (f", {run['commands_lost']} of {run['commands_sent']} lost" if run["commands_lost"] else "")
+
+
+def print_classroom(r: dict) -> None:
+    runs, t = r["runs"], r["targets"]
+    mark = {True: "", False: " (!)"}
+    print(f"classroom benchmark: ratchet preset, 1 presenter + {r['viewers']} viewers as light clients (their "
+          f"websockets, nothing drawn) in one process apart from the server, {r['cores']} cores; "
+          f"(!) misses the target")
+    rows = [("", "target", [f"{run['particles']} disks" for run in runs])]
+
+    def spread(run, key, scale=1.0, digits=1):
+        s = run["per_viewer"][key]
+        return f"{scale * s['min']:.{digits}f} / {scale * s['median']:.{digits}f} / {scale * s['max']:.{digits}f}"
+
+    rows += [
+        ("load average (1 min) before / after", "", [f"{run['load_before']:.2f} / {run['load_after']:.2f}"
+                                                     for run in runs]),
+        ("stage, simulated t", "", [f"{run['stage']}, {run['time_from']:.1f} to {run['time_to']:.1f}"
+                                    for run in runs]),
+        ("scene frames/s per viewer, min / median / max", f">= {t['frames_per_s']:g}",
+         [spread(run, "frames_per_s") + mark[run["pass"]["frames"]] for run in runs]),
+        ("scene frames/s pushed by the server", "", [f"{run['scene_pushed_fps']:.1f}" for run in runs]),
+        ("scene socket per viewer, messages/s", "", [spread(run, "scene_messages_per_s") for run in runs]),
+        ("scene socket per viewer, kB/s", "", [spread(run, "scene_bytes_per_s", 1e-3, 0) for run in runs]),
+        ("bokeh socket per viewer, messages/s", "", [spread(run, "bokeh_messages_per_s") for run in runs]),
+        ("bokeh socket per viewer, kB/s", "", [spread(run, "bokeh_bytes_per_s", 1e-3, 1) for run in runs]),
+        ("both sockets per viewer, Mbit/s", f"<= {t['mbit_per_s']:g} at 5600",
+         [spread(run, "mbit_per_s", 1.0, 2) + mark[run["pass"]["bandwidth"]] for run in runs]),
+        ("presenter: command -> /status, median / max ms", f"< {t['latency_ms']:g} median",
+         [_latency(run, "latency_ms") + mark[run["pass"]["latency"]] for run in runs]),
+        ("presenter: server -> engine (command_ms), median / max", "", [_latency(run, "command_ms") for run in runs]),
+        ("engine in the lab, M particle-steps/s", "", [f"{run['particle_steps_per_s'] / 1e6:.2f}" for run in runs]),
+        ("engine share of the preset headless, same interval", f">= {t['engine_share']:g}",
+         [f"{run['engine_share']:.2f} of {run['headless_same_interval'] / 1e6:.2f} M" + mark[run["pass"]["engine"]]
+          for run in runs]),
+        ("server resident MiB: no page / peak / after", "",
+         [f"{run['memory_idle_mib']:.0f} / {run['memory_peak_mib']:.0f} / {run['memory_after_mib']:.0f}"
+          for run in runs]),
+        ("CPU, cores: server / the clients' process", "",
+         [f"{run['server_cpu_cores']:.2f} / {run['client_cpu_cores']:.2f}" for run in runs]),
+        ("pages open (tabs in /status), seconds to open them", "",
+         [f"{run['tabs']}, {run['sessions_opened_s']:.1f} s" for run in runs]),
+    ]
+    widths = [max(len(row[0]) for row in rows), max(len(row[1]) for row in rows)]
+    columns = [max(len(row[2][k]) for row in rows) for k in range(len(runs))]
+    for name, target, values in rows:
+        print(f"  {name:<{widths[0]}}  {target:<{widths[1]}}  " +
+              "  ".join(f"{value:>{width}}" for value, width in zip(values, columns)))
+    for run in runs:
+        print(f"  where a viewer's bytes go at {run['particles']} disks (viewer 1, kB/s):")
+        for socket in ("scene", "bokeh"):
+            anatomy = run["anatomy"][socket]
+            total = sum(anatomy.values()) or 1.0
+            top = sorted(anatomy.items(), key=lambda item: -item[1])[:8 if socket == "scene" else 4]
+            print(f"    {socket}: " + "; ".join(f"{key.replace(SCENE_UPDATE, '')} {value / 1e3:.1f} "
+                                              f"({100 * value / total:.0f} %)" for key, value in top))
