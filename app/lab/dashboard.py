@@ -624,8 +624,9 @@ class Dashboard:
         """The named speed in effect highlighted; the link's query kept for the Copy link button."""
         speed = status.get("speed") if status.get("replay") else (status.get("settings") or {}).get("speed")
         speed = math.inf if speed == "inf" else speed
+        speeds = self._speeds()
         for name, button in self.named_speeds.items():
-            button.button_type = "primary" if self._speeds().get(name) == speed else "default"
+            button.button_type = "primary" if speeds.get(name) == speed else "default"
         link = json.dumps({**(status.get("link") or {"preset": status.get("preset", "ratchet")}),
                            **({"profile": "projector"} if self.projector.value else {})})
         if self.link_query.value != link:
