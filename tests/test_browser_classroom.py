@@ -339,7 +339,7 @@ def test_each_control_works_from_the_keyboard(browser, lab):
     focus(page, ".load-button button")
     press("Enter")
     wait_status(lab, lambda s: s.get("replay") is not None, timeout=60)
-    expect(page.locator(".preset-select select")).to_have_value("replay")  # the page shows the replay before a key
+    expect(page.locator(".preset-select select")).to_have_value("Replay of keys.h5")  # the page shows the replay before a key
     focus(page, ".preset-select select")
     press("ArrowUp")
     wait_status(lab, lambda s: s.get("replay") is None)
