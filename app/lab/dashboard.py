@@ -7,7 +7,7 @@ plots the preset is about, with the other plots, the preset's explanation and th
 one click away. Nothing needs scrolling at 1920×1080 or 1366×768.
 
 Every tab builds its own widgets, bokeh figures and sources (bokeh models cannot be shared
-between sessions) and pulls, every 200 ms, the rows it has not seen from the engine's ring
+between sessions) and pulls, every 200 ms (a viewer's every 500 ms), the rows it has not seen from the engine's ring
 buffers. Controls only queue commands for the engine thread; nothing here waits on it. A value
 the engine refuses goes back to the value in effect, with the message next to its control.
 """
@@ -40,6 +40,12 @@ from .plots import AnalysisFigures, compact, make_plot
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
 REPLAY = "replay"
+REFRESH_MS = 200
+VIEWER_REFRESH_MS = 500
+"""How often a page pulls the engine's new rows and status (milliseconds): the presenter's often,
+for controls that answer at once; a viewer's, one of thirty in a classroom that share the
+server's one core for Python with the engine, less often (its plots get the same rows, in fewer
+messages)."""
 FOCUS_CSS = ":focus-visible, .noUi-handle:focus { outline: 3px solid #e65100 !important; outline-offset: 2px; }"
 """Where the keyboard is, in every control: a thick orange ring, visible on a projector."""
 NARROW = "@media (max-width: 1100px)"
@@ -701,7 +707,7 @@ class Dashboard:
 
     # ------------------------------------------------------------------ layout
     def view(self):
-        pn.state.add_periodic_callback(self._refresh, period=200)
+        pn.state.add_periodic_callback(self._refresh, period=VIEWER_REFRESH_MS if self.viewer else REFRESH_MS)
         return self.page
 
     def _layout(self):
