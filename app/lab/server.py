@@ -32,6 +32,7 @@ import threading
 import time
 import urllib.parse
 import urllib.request
+from collections import deque
 from pathlib import Path
 
 import panel as pn
@@ -407,12 +408,16 @@ def write_presenter_address(data_dir: Path, url: str) -> Path:
     return path
 
 
+SPAWN_OUTPUT_LINES = 200
+"""The last lines a spawned lab printed, kept in its process's ``output``."""
+
+
 def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
           program: tuple[str, ...] = (sys.executable, "-m", "granlab.app.cli"), cwd: str | Path | None = None):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
-    benchmarks and tests; ``program`` the command that is ``granlab``); returns the process, the URL
-    it prints once serving (with tokens, the presenter's, from its file) and the viewers' URL (None
-    without tokens)."""
+    benchmarks and tests; ``program`` the command that is ``granlab``); returns the process (its
+    ``output``: the last lines it printed, read on in a thread), the URL it prints once serving
+    (with tokens, the presenter's, from its file) and the viewers' URL (None without tokens)."""
     process = subprocess.Popen([*program, "serve", "--port", "0", "--data-dir", str(data_dir), *options],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd)
     deadline = time.time() + timeout
@@ -424,10 +429,13 @@ def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
         found = re.search(r"viewers' address: (http://\S+)", line)
         viewer = found.group(1) if found else viewer
         found = re.search(r"GranLab lab at (http://\S+)", line)
-        if found:
-            return process, found.group(1), viewer
-        if "GranLab lab ready" in line:
-            return process, (Path(data_dir) / PRESENTER_FILE).read_text().strip(), viewer
+        if found or "GranLab lab ready" in line:
+            # read on: a pipe nobody reads fills up (64 KiB) and then blocks the server's next
+            # write, in whichever of its threads makes it
+            process.output = deque(maxlen=SPAWN_OUTPUT_LINES)
+            threading.Thread(target=process.output.extend, args=(process.stdout,), daemon=True).start()
+            url = found.group(1) if found else (Path(data_dir) / PRESENTER_FILE).read_text().strip()
+            return process, url, viewer
     process.kill()
     raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
 
