@@ -13,7 +13,7 @@ from playwright.sync_api import expect
 from granlab.app.lab import lessons
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
-from tests.test_browser import http_status, lab_only, model, open_dashboard, status, wait_model, wait_status
+from tests.test_browser import http_status, lab_only, open_dashboard, status, wait_model, wait_status
 
 
 @pytest.fixture(scope="module")
@@ -381,18 +381,23 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     page.goto(lab["url"] + "?preset=ratchet16&profile=projector")
     toggle = page.locator(".projector-toggle input")
     expect(toggle).to_be_checked(timeout=60000)
+    # each figure's change may come in a message of its own: every one is waited for, none read once
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
-    widths = ("m.renderers.map(r => r.glyph.line_width).map(w => typeof w == 'number' ? w : w && w.value)"
-              ".filter(w => typeof w == 'number')")
-    thick = model(page, "figure-coulomb-cone", widths)
-    assert model(page, "figure-coulomb-cone", "m.below[0].axis_label_text_font_size") == "17px"
+    wait_model(page, "figure-coulomb-cone", "m.below[0].axis_label_text_font_size == '17px'")
+    widths = ("JSON.stringify(m.renderers.map(r => r.glyph.line_width).map(w => typeof w == 'number' ? w : w && w.value)"
+              ".filter(w => typeof w == 'number'))")
+    # the cone's dashed line, the contacts' paths and the three markers' outlines (plots.py), twice as thick
+    thin, thick = f"{widths} == '[1.5,2,1,1,1]'", f"{widths} == '[3,4,2,2,2]'"
+    wait_model(page, "figure-coulomb-cone", thick)
     expect(page.locator(".link-query input")).to_have_value(re.compile('"profile": "projector"'))  # next refresh
     toggle.focus()
     page.keyboard.press("Space")  # off, from the keyboard
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '14px'")
-    thin = model(page, "figure-coulomb-cone", widths)
-    assert thick == [2 * width for width in thin] and max(thin) > 0
+    wait_model(page, "figure-coulomb-cone", thin)
     expect(page.locator(".link-query input")).not_to_have_value(re.compile("profile"))
+    page.keyboard.press("Space")  # on again
+    wait_model(page, "figure-coulomb-cone", thick)
+    wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
 
 
 @pytest.fixture(scope="module")
