@@ -42,6 +42,8 @@ class SceneFrame:
     watched_index: np.ndarray | None = None  # (K,) int: position of each watched segment's pair in
     #                                           the watch list (its colour); None: 0, 1, 2, ...
     labels: tuple[tuple[str, float, float], ...] = ()  # (text, x, y): a name whose top centre is at (x, y)
+    ends: np.ndarray | None = None  # (M, 2) int: the disk at each end of each contact's segment, -1 - w for
+    #                                  wall w's point (the viewers' stream sends pairs, not segments)
 
     def __post_init__(self) -> None:
         sizes = {"N": np.shape(self.positions)[0] if np.ndim(self.positions) else 0,
@@ -58,6 +60,9 @@ class SceneFrame:
                 allowed = ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "")
                 raise ValueError(f"SceneFrame.{name} has shape {actual}; allowed: ({allowed}) "
                                  f"with N = {sizes['N']} disks, M = {sizes['M']} contacts")
+        if self.ends is not None and np.shape(self.ends) != (sizes["M"], 2):
+            raise ValueError(f"SceneFrame.ends has shape {np.shape(self.ends)}; allowed: ({sizes['M']}, 2), "
+                             "two disks per contact")
         if self.watched_index is None:
             object.__setattr__(self, "watched_index", np.arange(len(self.watched)))
         elif np.shape(self.watched_index) != (len(self.watched),):
@@ -199,11 +204,12 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
     pressure = np.zeros(n_total)
     sliding = np.zeros(n_total, dtype=np.bool_)
     segments = np.empty((m_total, 2, 2))
+    ends = np.empty((m_total, 2), dtype=np.int64)
     force = np.empty(m_total)
     kind = np.empty(m_total, dtype=np.int8)
     positions, walls, watched_segments, watched_index = [], [], [], []
     cell = None
-    n0 = m0 = 0
+    n0 = m0 = w0 = 0
     for (data, offset), pairs in zip(parts, watched):
         shift = np.asarray(offset, dtype=float)
         n, m = data.positions.shape[0], data.pair.shape[0]
@@ -212,6 +218,8 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                        _f64(data.wall_normal).reshape(-1, 2), _f64(data.cell), shift, coordination[n0:n0 + n],
                        pressure[n0:n0 + n], sliding[n0:n0 + n], segments[m0:m0 + m], force[m0:m0 + m],
                        kind[m0:m0 + m])
+        ends[m0:m0 + m, 0] = data.pair[:, 0] + n0
+        ends[m0:m0 + m, 1] = np.where(data.pair[:, 1] < n, data.pair[:, 1] + n0, n - 1 - w0 - data.pair[:, 1])
         positions.append(data.positions + shift)
         walls.append(_wall_segments(data) + shift)
         rows, index = _rows_of(data.pair, pairs)
@@ -219,7 +227,7 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
         watched_index.append(index)
         if data.cell.any() and len(parts) == 1:
             cell = (float(data.cell[0]), float(data.cell[1]))
-        n0, m0 = n0 + n, m0 + m
+        n0, m0, w0 = n0 + n, m0 + m, w0 + data.wall_normal.reshape(-1, 2).shape[0]
     positions, radii = np.concatenate(positions), np.concatenate([d.radii for d, _ in parts])
     return SceneFrame(positions=positions, radii=radii,
                       angles=np.concatenate([d.angles for d, _ in parts]), coordination=coordination,
@@ -227,7 +235,7 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                       contact_kind=kind, walls=np.concatenate(walls).reshape(-1, 2, 2), cell=cell,
                       watched=np.concatenate(watched_segments).reshape(-1, 2, 2),
                       watched_index=np.concatenate(watched_index).astype(np.int64),
-                      labels=group_labels(positions, radii, groups))
+                      labels=group_labels(positions, radii, groups), ends=ends)
 
 
 def cell_outline(cell: tuple[float, float]) -> np.ndarray:

@@ -574,7 +574,7 @@ def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     bare = token_lab["url"].split("?")[0]
     assert token_lab["viewer"].split("?")[0] == bare and token_lab["viewer"] != token_lab["url"]
     for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong",
-                bare + "lesson?preset=block"):
+                bare + "lesson?preset=block", bare + "viewer-scene", bare + "viewer-scene?token=wrong"):
         assert http_status(url) == 403, url
     assert http_status(endpoint(token_lab["viewer"], "status")) == 200
     # the presenter's address is not printed (a projector may show the terminal) but kept for its owner
@@ -643,11 +643,11 @@ def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, t
     assert status(token_lab)["state"] == "running"
     presenter.locator(".play-button button").click()
     wait_status(token_lab, lambda s: s["state"] == "paused")
-    # the scene's websocket: each tab's token opens it, from the scene page's own origin only
-    for page in (presenter, viewer):
-        address, port = scene_socket(page)
-        assert handshake(address, f"http://127.0.0.1:{port}") == 101
-        assert handshake(address, "http://evil.example") == 403
+    # the presenter's 3D scene: its token opens the websocket, from the scene page's own origin only
+    # (a viewer's scene is the viewers' stream: test_browser_classroom.py)
+    address, port = scene_socket(presenter)
+    assert handshake(address, f"http://127.0.0.1:{port}") == 101
+    assert handshake(address, "http://evil.example") == 403
     assert handshake(address.rsplit("/", 1)[0] + "/", f"http://127.0.0.1:{port}") == 403
     assert handshake(address.rsplit("/", 1)[0] + "/wrong", f"http://127.0.0.1:{port}") == 403
     presenter.close()

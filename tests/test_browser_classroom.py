@@ -443,4 +443,59 @@ def test_a_viewers_tablet_or_phone_shows_the_scene_above_the_key_plots_within_th
     assert boxes["scene"]["top"] < boxes["legend"]["top"] < boxes["panes"]["top"] < boxes["plot"]["top"]
     assert boxes["plot"]["width"] >= 0.9 * width - 20 and boxes["plot"]["height"] >= 250
     expect(page.locator(".speed-text")).to_be_visible()
+    canvas = viewer_scene(page).evaluate("() => document.querySelector('canvas').getBoundingClientRect().width")
+    assert canvas >= boxes["scene"]["width"] - 20  # the 2D scene fills its place
     context.close()
+
+
+def viewer_scene(page):
+    """The frame of a viewer's 2D scene, once it has drawn a frame of the viewers' stream."""
+    for _ in range(240):
+        frame = next((f for f in page.frames if "/viewer-scene" in f.url), None)
+        if frame is not None:
+            break
+        page.wait_for_timeout(500)
+    else:
+        raise AssertionError(f"no viewer's scene among the page's frames {[f.url for f in page.frames]}")
+    frame.wait_for_function("() => window.granlabScene && window.granlabScene.drawn > 0", polling=200, timeout=60000)
+    return frame
+
+
+PAINTED = """() => { const c = document.querySelector("canvas"), d = c.getContext("2d").getImageData(0, 0, c.width,
+  c.height).data; let k = 0; for (let i = 0; i < d.length; i += 4) if (d[i] < 240 || d[i + 1] < 240 || d[i + 2] < 240) k++;
+  return k / (d.length / 4) }"""
+
+
+def stream_handshake(url: str, origin: str) -> int:
+    """The HTTP status the viewers' stream answers at ``url`` (ws://): 101 if it opens."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    try:
+        with connect(url, origin=origin, open_timeout=10):
+            return 101
+    except InvalidStatus as error:
+        return error.response.status_code
+
+
+def test_a_viewers_scene_is_the_lab_s_packing_drawn_from_the_viewers_stream(browser, token_lab):
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    lab_only(page, token_lab)
+    page.goto(token_lab["viewer"])
+    frame = viewer_scene(page)
+    seq = frame.evaluate("() => granlabScene.seq")
+    frame.wait_for_function(f"() => granlabScene.seq >= {seq + 10}", polling=200, timeout=30000)  # it follows the run
+    shown = frame.evaluate("() => ({n: granlabScene.header.n, contacts: granlabScene.ci.length,"
+                           " palette: granlabScene.palette.length, field: granlabScene.header.field})")
+    s = status(token_lab)
+    assert shown["n"] == s["particles"] == 16 and shown["field"] == "rotation" and shown["palette"] == 256
+    assert shown["contacts"] >= 16  # a box of 16 disks at z = 3, and its walls
+    assert frame.evaluate(PAINTED) > 0.2  # disks, force lines and walls
+    # the stream's socket: a valid token, from the lab's own origin
+    bare = urlparse(token_lab["viewer"])
+    address, origin = f"ws://{bare.netloc}/viewer-stream", f"http://{bare.netloc}"
+    assert stream_handshake(f"{address}?{bare.query}", origin) == 101
+    assert stream_handshake(f"{address}?{bare.query}", "http://evil.example") == 403
+    assert stream_handshake(f"{address}?token=wrong", origin) == 403
+    assert stream_handshake(address, origin) == 403
+    page.close()

@@ -5,13 +5,14 @@ their own (``python -m granlab.app.lab.classroom SPEC.json``; the result is writ
 A session, as the page's scripts do it: GET the page (it sets the token's cookie and carries
 bokeh's session token), bokeh's websocket (``/ws``, subprotocols ``["bokeh", token]``, the
 document pulled as bokeh's client pulls it), the scene's address from the iframe in that
-document, the scene's websocket (viser's subprotocol, the page's origin) and one camera report
-(viser counts a client as connected from its first one; a browser sends it once it draws).
+document, and the scene's websocket: a viewer's, the viewers' stream of the dashboard's server
+(app/lab/stream.py); the presenter's, viser's (its subprotocol, the page's origin) with one camera
+report (viser counts a client as connected from its first one; a browser sends it once it draws).
 
 Counted per socket from outside the server: websocket messages and bytes received (neither
 server compresses its websocket: these are the bytes on the wire, less the frames' few bytes of
-header), and on the scene's socket the frames, a frame being a message that moves the disks
-(viser sends nothing for an unchanged value). The presenter changes the load's period through
+header), and on the scene's socket the frames, a frame being a message of the viewers' stream or
+one of viser's that moves the disks (viser sends nothing for an unchanged value). The presenter changes the load's period through
 its own bokeh websocket, as its page's input box does, and the latency runs from that message to
 the value in ``/status``. Only this module's imports are loaded: the clients' process stays small.
 """
@@ -29,6 +30,7 @@ import sys
 import time
 import urllib.parse
 import urllib.request
+import zlib
 from collections import Counter
 from pathlib import Path
 
@@ -152,6 +154,13 @@ class Session:
         if found is None:
             raise RuntimeError("no scene iframe in the dashboard's document")
         page = urllib.parse.urlsplit(html.unescape(found.group(1)))
+        if page.path == "/viewer-scene":  # a viewer's scene: the viewers' stream, from the dashboard's server
+            scene = await connect(f"ws://{address.netloc}/viewer-stream?{page.query}", origin=origin,
+                                  additional_headers={"Cookie": cookie}, max_size=None, compression=None,
+                                  open_timeout=OPEN_TIMEOUT)
+            self.sockets.append(scene)
+            self.tasks.append(asyncio.create_task(self._read(scene, self._stream_received)))
+            return
         given = urllib.parse.parse_qs(page.query).get("websocket")
         scene = await connect(given[0] if given else f"ws://{page.netloc}/", origin=f"http://{page.netloc}",
                               subprotocols=[f"viser-v{importlib.metadata.version('viser')}"], max_size=None,
@@ -230,6 +239,17 @@ class Session:
                     carried += size
                     anatomy[f"{m['type']} {m.get('name') or ''}.{field}".replace(" .", " ")] += size
         anatomy["sizes, zstd msgpack of the messages, padding"] += len(message) - carried
+
+    def _stream_received(self, message: bytes) -> None:
+        """Count a message of the viewers' stream (app/lab/stream.py): each one is a frame, a key frame
+        (every array whole) or a frame's change."""
+        self.scene.messages += 1
+        self.scene.frames += 1
+        self.scene.bytes += _size(message)
+        if self.scene.anatomy is not None:
+            data = zlib.decompress(message)
+            header = json.loads(data[4:4 + int.from_bytes(data[:4], "little")])
+            self.scene.anatomy["viewers' stream, " + ("key frames" if header["key"] else "changes")] += _size(message)
 
     async def command(self, model: str, attr: str, value) -> None:
         """Send a change of ``model``'s ``attr`` as the page does when a widget changes."""

@@ -157,7 +157,8 @@ class Dashboard:
                                     if viewer else [])
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["legend"])
         self.scene_pane = pn.pane.HTML(
-            f'<iframe src="{scene_url}" title="3D scene" tabindex="-1" style="width:100%;height:100%;border:0">'
+            f'<iframe src="{scene_url}" title="{"2D" if viewer else "3D"} scene" tabindex="-1" '
+            'style="width:100%;height:100%;border:0">'
             '</iframe>',  # out of the Tab order: its viser panel would hold a keyboard user for a dozen stops
             sizing_mode="stretch_both", min_height=300, css_classes=["scene"])
         self.key_names: list[str] = []

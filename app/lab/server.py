@@ -1,9 +1,11 @@
 """``granlab serve``: the engine thread, the viser scene and the panel server, together.
 
 Binds 127.0.0.1 unless told otherwise. Routes: ``/`` the dashboard (one per tab), ``/status``
-and ``/scene`` JSON for tests and monitoring. The viser client is served by viser on its own
-port and embedded in the dashboard; only the dashboard's address is printed. The scene's
-websocket admits only the scene page's own origin (any web page could otherwise connect to it).
+and ``/scene`` JSON for tests and monitoring, ``/lesson`` a lesson sheet to print, and a viewer's
+2D scene ``/viewer-scene`` with its websocket ``/viewer-stream`` (:mod:`.stream`). The presenter's
+viser client is served by viser on its own port and embedded in the dashboard; only the
+dashboard's address is printed. Each scene's websocket admits only its page's own origin (any web
+page could otherwise connect to it).
 
 Served on a network (or with ``tokens``), the lab prints two addresses, each with its own random
 token: the presenter's, which controls the simulation and its files, and the viewers', which see
@@ -54,6 +56,9 @@ from . import lessons
 from .dashboard import Dashboard
 from .engine_thread import HISTORY_MIB, LabEngine
 from .scene import SceneView
+from .stream import StreamSocket, ViewerStream
+
+VIEWER_SCENE = Path(__file__).resolve().parents[2] / "static" / "viewer" / "scene.html"
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 # glibc (None elsewhere) keeps what a closed tab's session freed in the arena of the thread that
@@ -132,9 +137,9 @@ class JSONHandler(tornado.web.RequestHandler):
         self.write(json.dumps(jsonable(self.read())))
 
 
-class LessonHandler(tornado.web.RequestHandler):
-    """``GET lesson?preset=NAME``: the preset's lesson sheet as a page to print (with ``roles``, only
-    to a request with a valid token, which the dashboard's cookie carries)."""
+class PageHandler(tornado.web.RequestHandler):
+    """A page of the lab: with ``roles``, only to a request with a valid token (the dashboard's
+    cookie carries it)."""
 
     def initialize(self, roles):
         self.roles = roles
@@ -143,6 +148,10 @@ class LessonHandler(tornado.web.RequestHandler):
         if self.roles and request_role(self, self.roles) is None:
             raise tornado.web.HTTPError(403, "a valid token is needed")
 
+
+class LessonHandler(PageHandler):
+    """``GET lesson?preset=NAME``: the preset's lesson sheet as a page to print."""
+
     def get(self):
         name = self.get_query_argument("preset", "")
         sheet = lessons.lesson(name) if name in PRESETS else None
@@ -150,6 +159,14 @@ class LessonHandler(tornado.web.RequestHandler):
             raise tornado.web.HTTPError(404, f"no lesson sheet for preset {name!r}: one of {', '.join(PRESETS)}")
         self.set_header("Content-Type", "text/html; charset=utf-8")
         self.write(lessons.lesson_html(sheet, standalone=True))
+
+
+class ViewerSceneHandler(PageHandler):
+    """``GET viewer-scene``: a viewer's scene, drawn in 2D from the viewers' stream."""
+
+    def get(self):
+        self.set_header("Content-Type", "text/html; charset=utf-8")
+        self.write(VIEWER_SCENE.read_bytes())
 
 
 class Lab:
@@ -167,6 +184,7 @@ class Lab:
         self.scene.on_pick(lambda index: self.engine.submit("watch_disk", index=index))
         self.engine.scene_fps = self.scene.fps
         self.scene_interval = 1.0 / scene_rate
+        self.stream = ViewerStream()
         self._stop = threading.Event()
         self._release_pending = False
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
@@ -183,7 +201,10 @@ class Lab:
                                extra_patterns=[(r"/status", JSONHandler, {"read": self.status, "roles": self.roles}),
                                                (r"/scene", JSONHandler, {"read": self.scene.state,
                                                                          "roles": self.roles}),
-                                               (r"/lesson", LessonHandler, {"roles": self.roles})],
+                                               (r"/lesson", LessonHandler, {"roles": self.roles}),
+                                               (r"/viewer-scene", ViewerSceneHandler, {"roles": self.roles}),
+                                               (r"/viewer-stream", StreamSocket,
+                                                {"stream": self.stream, "admit": self._admit_stream})],
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
                                **auth)
 
@@ -191,6 +212,8 @@ class Lab:
         status = self.engine.status()
         status["threads"] = threading.active_count()
         status["scene_frames"] = self.scene.frames_pushed
+        status["stream_messages"] = self.stream.messages
+        status["stream_viewers"] = len(self.stream.sockets)
         return status
 
     def _session(self):
@@ -206,11 +229,13 @@ class Lab:
         host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
         scene_url = f"http://{host}:{self.scene.port}/"
         token = self._session_token()
-        if token:  # viser's client drops the page's query; its websocket address may carry a path
+        viewer = self.roles.get(token) == "viewer"
+        if viewer:  # the viewers' own stream, drawn in 2D: compact, and encoded once for all of them
+            scene_url = "/viewer-scene?token=" + urllib.parse.quote(token)
+        elif token:  # viser's client drops the page's query; its websocket address may carry a path
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
         query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items() if values}
-        return Dashboard(self.engine, self.scene, scene_url, viewer=self.roles.get(token) == "viewer",
-                         query=query).view()
+        return Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query).view()
 
     def _session_token(self) -> str:
         """The valid token of the page being opened: in its address, else in its cookie."""
@@ -243,6 +268,11 @@ class Lab:
             return None
         return f"origin {origin} is not the lab's scene page"
 
+    def _admit_stream(self, handler: tornado.web.RequestHandler) -> bool:
+        """Whether a page may receive the viewers' stream: any without tokens (tornado lets in only
+        the lab's own origin), else one with a valid token."""
+        return not self.roles or request_role(handler, self.roles) is not None
+
     def _closed(self, session_context) -> None:
         self.engine.tabs = max(0, self.engine.tabs - 1)
         if MALLOC_TRIM is not None and not self._release_pending:
@@ -262,6 +292,8 @@ class Lab:
             last, frame = self.engine.frame(seen=last, timeout=0.2)
             if frame is not None:
                 self.scene.draw(frame)
+                if self.stream.sockets:
+                    self.stream.publish(frame, self.scene.color_field)
                 self._stop.wait(max(0.0, self.scene_interval - (time.perf_counter() - start)))
 
     @property
@@ -278,6 +310,7 @@ class Lab:
         return f"http://{self.host}:{self.port}/" + (f"?token={token}" if token else "")
 
     def start(self) -> None:
+        self.stream.io_loop = self.server.io_loop
         self.engine.start()
         self._scene_thread.start()
         self.server.start()

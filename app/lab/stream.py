@@ -1,0 +1,303 @@
+"""The viewers' stream: the scene as compact binary frames, encoded once for every viewer's page.
+
+viser sends each array whole, as float32, and encodes each message once per client: at 5600
+disks the positions alone are 5.4 Mbit/s at 10 frames/s a viewer. The viewers' pages draw the
+scene on a 2D canvas instead (``viewer_scene.html``), fed by this stream:
+
+- positions quantised to 16 bits in a box around the picture (kept while the picture stays in it
+  and fills most of it), an angle and a colour (the row of the colour field's palette) a byte each;
+- contacts as pairs of disks (a negative partner for a wall's point, whose position is sent) with a byte of force
+  class and kind;
+- each frame as the change from the last one: the disks' arrays as differences modulo 2¹⁶ or 2⁸,
+  the contacts as those gone and those added, then the change of each one's byte;
+- a key frame (every array whole) to a page that opens, or falls behind, or when the box, the
+  number of disks or the colour field changes;
+- the whole message compressed with zlib once (the page inflates it with DecompressionStream).
+
+A message: a 4-byte little-endian header length, the header (JSON: ``seq``, ``key``, ``parts``
+naming each array, its dtype, length and mode, and the frame's few floats), then the arrays, each
+padded to 4 bytes. A page applies messages in ``seq`` order and reopens its socket at a gap.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import threading
+import time
+import zlib
+
+import numpy as np
+import tornado.web
+import tornado.websocket
+
+from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, PALETTES, SPOKE_COLOR,
+                             WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes, frame_bounds)
+
+STREAM_RATE = 20.0
+"""Frames per second at most on the viewers' stream (the presenter's 3D scene draws up to 30)."""
+
+BOX_MARGIN = 0.05
+"""The quantisation box reaches this fraction of the picture's size past it on each side."""
+
+BOX_FILL = 0.7
+"""A new box (a key frame) once the picture spans less than this fraction of the box along an axis."""
+
+LEVEL = 6
+"""zlib's level: at 5600 disks about 1 ms a frame on this machine class."""
+
+DTYPES = {"u1": np.uint8, "u2": np.uint16, "i4": np.int32, "u4": np.uint32, "f4": np.float32}
+
+
+def _hex(rgb) -> str:
+    return "#%02x%02x%02x" % tuple(int(c) for c in rgb)
+
+
+def style() -> dict:
+    """The colours and widths the page draws with (those of the 3D scene)."""
+    return {"spoke": _hex(SPOKE_COLOR), "wall": _hex(WALL_COLOR), "cell": _hex(CELL_COLOR),
+            "kinds": [_hex(color) for _, color in CONTACT_KINDS], "watched": [_hex(c) for c in WATCHED_COLORS],
+            "classes": FORCE_CLASSES, "forceWidth": MAX_FORCE_THICKNESS, "watchedWidth": WATCHED_THICKNESS}
+
+
+def _pack(header: dict, parts: list[tuple[str, np.ndarray, str]]) -> bytes:
+    """One message: header and arrays, compressed."""
+    header["parts"] = [[name, array.dtype.str[1:], int(array.size), mode] for name, array, mode in parts]
+    text = json.dumps(header, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    chunks = [struct.pack("<I", len(text)), text]
+    for _, array, _ in parts:
+        data = np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<"), copy=False).tobytes()
+        chunks.append(data + b"\0" * (-len(data) % 4))
+    return zlib.compress(b"".join(chunks), LEVEL)
+
+
+def unpack(message: bytes) -> tuple[dict, dict[str, tuple[np.ndarray, str]]]:
+    """The header and the arrays (with their modes) of a message (as a page decodes it)."""
+    data = zlib.decompress(message)
+    (length,) = struct.unpack_from("<I", data)
+    header = json.loads(data[4:4 + length])
+    offset, arrays = 4 + length, {}
+    for name, dtype, count, mode in header["parts"]:
+        array = np.frombuffer(data, dtype=np.dtype(dtype).newbyteorder("<"), count=count, offset=offset)
+        arrays[name] = (array, mode)
+        offset += array.nbytes + (-array.nbytes % 4)
+    return header, arrays
+
+
+class Encoder:
+    """The stream's state (what every page up to date holds) and the messages that change it.
+
+    ``encode`` is called from one thread (the scene's); ``keyframe`` from any (the server's loop,
+    for a page that opens): both under one lock."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.seq = 0
+        self._box: tuple[float, float, float, float] | None = None  # x0, y0, step x, step y
+        self._field = ""
+        self._state: dict[str, np.ndarray] = {}
+        self._header: dict = {}
+        self._index = np.zeros(0, dtype=np.intp)
+        self._scratch = np.zeros(0)
+
+    def encode(self, frame, field: str) -> bytes:
+        """The message that brings a page from the last frame to ``frame`` coloured by ``field``."""
+        with self._lock:
+            n = len(frame.radii)
+            bounds = frame_bounds(frame)
+            key = (not self._state or len(self._state["radius"]) != n or field != self._field
+                   or not self._box_holds(bounds))
+            if key:
+                self._box = self._new_box(bounds)
+            state = self._arrays(frame, field)
+            self.seq += 1
+            self._header = self._frame_header(frame, field, bounds)
+            if key:
+                self._state, self._field = state, field
+                return self._keyframe()
+            previous, self._state, self._field = self._state, state, field
+            parts = [(name, state[name] - previous[name], "delta")  # unsigned: modulo 2¹⁶ or 2⁸
+                     for name in ("pos", "angle", "color")]
+            if not np.array_equal(state["radius"], previous["radius"]):
+                parts.append(("radius", state["radius"], "abs"))
+            parts += self._contact_parts(previous, state)
+            return _pack({**self._header, "seq": self.seq, "key": False}, parts)
+
+    def keyframe(self) -> bytes | None:
+        """The message that brings a page with nothing to the last frame (None before the first)."""
+        with self._lock:
+            return self._keyframe() if self._state else None
+
+    def _keyframe(self) -> bytes:
+        s = self._state
+        parts = [(name, s[name], "abs") for name in ("pos", "angle", "color", "radius", "ci", "cj", "cls", "far")]
+        header = {**self._header, "seq": self.seq, "key": True, "field": self._field,
+                  "palette": [_hex(c) for c in PALETTES[self._field]], "style": style()}
+        return _pack(header, parts)
+
+    def _contact_parts(self, previous: dict, state: dict) -> list:
+        """The contacts' change: none gone or added (the same pairs in the same order), or those gone
+        (their rows in the page's list) and those added (appended), then each row's byte and wall
+        point as the change from the page's rows (0 for an added one)."""
+        old, new = previous["code"], state["code"]
+        if np.array_equal(old, new):
+            return [("cls", state["cls"] - previous["cls"], "delta"), ("far", state["far"] - previous["far"], "delta")]
+        by_code = np.argsort(new, kind="stable")
+        sorted_new = new[by_code]
+        if np.any(sorted_new[1:] == sorted_new[:-1]):  # the same pair twice (two images in a tiny cell)
+            return [(name, state[name], "abs") for name in ("ci", "cj", "cls", "far")]
+        kept = _among(old, sorted_new)
+        added = ~_among(new, np.sort(old))
+        order = np.concatenate([old[kept], new[added]])
+        rows = by_code[np.searchsorted(sorted_new, order)]  # each of the page's rows in this frame
+        for name in ("code", "ci", "cj", "cls"):
+            state[name] = state[name][rows]
+        state["far"] = state["far"].reshape(-1, 2)[rows].ravel()
+        base_cls = np.concatenate([previous["cls"][kept], np.zeros(added.sum(), dtype=np.uint8)])
+        base_far = np.concatenate([previous["far"].reshape(-1, 2)[kept].ravel(),
+                                   np.zeros(2 * added.sum(), dtype=np.uint16)])
+        return [("gone", np.flatnonzero(~kept).astype(np.uint32), "abs"),
+                ("ci", state["ci"][len(order) - added.sum():], "append"),
+                ("cj", state["cj"][len(order) - added.sum():], "append"),
+                ("cls", state["cls"] - base_cls, "delta"),
+                ("far", state["far"] - base_far, "delta")]
+
+    def _arrays(self, frame, field: str) -> dict[str, np.ndarray]:
+        n, m = len(frame.radii), len(frame.contacts)
+        if len(self._index) != n:
+            self._index, self._scratch = np.zeros(n, dtype=np.intp), np.zeros(n)
+        color_index(frame, field, self._index, self._scratch)
+        ends = frame.ends if frame.ends is not None else np.full((m, 2), -1, dtype=np.int64)
+        wall = ends[:, 1] < 0
+        far = np.zeros((m, 2), dtype=np.uint16)
+        far[wall] = self._quantise(frame.contacts[wall, 1])
+        kind = np.clip(frame.contact_kind, 0, len(CONTACT_KINDS) - 1).astype(np.intp)
+        return {"pos": self._quantise(frame.positions).ravel(),
+                "angle": (np.floor(np.mod(frame.angles, 2.0 * np.pi) * (256 / (2.0 * np.pi))).astype(np.int64)
+                          % 256).astype(np.uint8),
+                "color": self._index.astype(np.uint8), "radius": frame.radii.astype(np.float32),
+                "code": (ends[:, 0] << 32) + ends[:, 1] + (1 << 31), "ci": ends[:, 0].astype(np.int32),
+                "cj": ends[:, 1].astype(np.int32),
+                "cls": (force_classes(frame.contact_force) + FORCE_CLASSES * kind).astype(np.uint8),
+                "far": far.ravel()}
+
+    def _quantise(self, points: np.ndarray) -> np.ndarray:
+        x0, y0, sx, sy = self._box
+        q = np.empty(np.shape(points), dtype=np.uint16)
+        q[..., 0] = np.clip(np.rint((points[..., 0] - x0) / sx), 0, 65535)
+        q[..., 1] = np.clip(np.rint((points[..., 1] - y0) / sy), 0, 65535)
+        return q
+
+    @staticmethod
+    def _new_box(bounds) -> tuple[float, float, float, float]:
+        xmin, xmax, ymin, ymax = bounds
+        size = max(xmax - xmin, ymax - ymin, 1e-12)
+        pad = BOX_MARGIN * size
+        return (xmin - pad, ymin - pad, (xmax - xmin + 2 * pad) / 65535, (ymax - ymin + 2 * pad) / 65535)
+
+    def _box_holds(self, bounds) -> bool:
+        if self._box is None:
+            return False
+        x0, y0, sx, sy = self._box
+        x1, y1 = x0 + 65535 * sx, y0 + 65535 * sy
+        xmin, xmax, ymin, ymax = bounds
+        inside = x0 <= xmin and xmax <= x1 and y0 <= ymin and ymax <= y1
+        return inside and xmax - xmin >= BOX_FILL * (x1 - x0) and ymax - ymin >= BOX_FILL * (y1 - y0)
+
+    def _frame_header(self, frame, field: str, bounds) -> dict:
+        def rounded(values) -> list:
+            return [round(float(v), 7) for v in np.ravel(values)]
+
+        return {"n": len(frame.radii), "box": list(self._box), "bounds": rounded(bounds), "field": field,
+                "cell": list(frame.cell) if frame.cell is not None else None, "walls": rounded(frame.walls),
+                "watched": rounded(frame.watched), "watchedIndex": [int(k) for k in frame.watched_index],
+                "labels": [[text, round(x, 7), round(y, 7)] for text, x, y in frame.labels],
+                "meanRadius": float(frame.radii.mean()) if len(frame.radii) else 1.0}
+
+
+def _among(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """Whether each of ``values`` is in ``sorted_set`` (sorted): np.isin without its hashing, 5× slower here."""
+    if not len(sorted_set):
+        return np.zeros(len(values), dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_set, values), len(sorted_set) - 1)
+    return sorted_set[at] == values
+
+
+class ViewerStream:
+    """The encoder and the open viewers' sockets: ``publish`` (the scene's thread) encodes a frame
+    at most ``STREAM_RATE`` times a second and hands it to the server's loop, which writes it to
+    every socket whose last message has gone; one still sending gets a key frame once it has."""
+
+    def __init__(self, io_loop=None):
+        self.encoder = Encoder()
+        self.io_loop = io_loop
+        self.sockets: dict["StreamSocket", bool] = {}  # socket -> whether it missed a message
+        self.messages = 0
+        self._last = 0.0
+
+    def publish(self, frame, field: str) -> None:
+        now = time.monotonic()
+        if self.io_loop is None or now - self._last < 1.0 / STREAM_RATE:
+            return
+        self._last = now
+        message = self.encoder.encode(frame, field)
+        self.io_loop.add_callback(self._send, message)
+
+    def _send(self, message: bytes) -> None:
+        self.messages += 1
+        for socket, missed in list(self.sockets.items()):
+            if socket.sending:
+                self.sockets[socket] = True
+                continue
+            if missed:
+                self.sockets[socket] = False
+                keyframe = self.encoder.keyframe()
+                socket.send(keyframe if keyframe is not None else message)
+            else:
+                socket.send(message)
+
+    def opened(self, socket: "StreamSocket") -> None:
+        self.sockets[socket] = False
+        keyframe = self.encoder.keyframe()
+        if keyframe is not None:
+            socket.send(keyframe)
+
+    def closed(self, socket: "StreamSocket") -> None:
+        self.sockets.pop(socket, None)
+
+
+class StreamSocket(tornado.websocket.WebSocketHandler):
+    """``/viewer-stream``: a page that ``admit`` lets in (with tokens, a valid one in its cookie or
+    address), from its own origin (tornado's default), receives the stream; what it sends is ignored."""
+
+    def initialize(self, stream: ViewerStream, admit):
+        self.stream = stream
+        self.admit = admit
+        self.sending = False
+
+    def prepare(self):
+        if not self.admit(self):
+            raise tornado.web.HTTPError(403, "a valid token is needed")
+
+    def open(self):
+        self.stream.opened(self)
+
+    def on_close(self):
+        self.stream.closed(self)
+
+    def on_message(self, message):
+        pass
+
+    def send(self, message: bytes) -> None:
+        """Write ``message``; ``sending`` until it has gone to the socket."""
+        try:
+            future = self.write_message(message, binary=True)
+        except tornado.websocket.WebSocketClosedError:
+            self.stream.closed(self)
+            return
+        self.sending = True
+        future.add_done_callback(self._sent)
+
+    def _sent(self, future) -> None:
+        self.sending = False
