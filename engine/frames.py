@@ -238,6 +238,30 @@ def build_frame(parts: list[tuple[FrameData, tuple[float, float]]],
                       labels=group_labels(positions, radii, groups), ends=ends)
 
 
+def meeting_walls(normals: np.ndarray, offsets: np.ndarray, positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(W, 2, 2) each wall ``n · x = s`` as a segment across the disks and the other walls, ending
+    where they end (a box's walls meet at its corners); NaN where a wall misses that region."""
+    lo = (positions - radii[:, None]).min(axis=0)
+    hi = (positions + radii[:, None]).max(axis=0)
+    for normal, offset in zip(normals, offsets):
+        for axis in range(2):
+            if abs(abs(normal[axis]) - 1.0) < 1e-12:  # a wall across this axis bounds the region along it
+                lo[axis], hi[axis] = min(lo[axis], offset * normal[axis]), max(hi[axis], offset * normal[axis])
+    segments = np.full((len(normals), 2, 2), np.nan)
+    for k, (normal, offset) in enumerate(zip(normals, offsets)):
+        point, tangent = offset * normal, np.array([-normal[1], normal[0]])
+        ends = [-np.inf, np.inf]
+        for axis in range(2):
+            if abs(tangent[axis]) > 1e-12:
+                a, b = sorted(((lo[axis] - point[axis]) / tangent[axis], (hi[axis] - point[axis]) / tangent[axis]))
+                ends = [max(ends[0], a), min(ends[1], b)]
+            elif not lo[axis] <= point[axis] <= hi[axis]:
+                ends = [1.0, 0.0]
+        if ends[0] < ends[1]:
+            segments[k] = [point + ends[0] * tangent, point + ends[1] * tangent]
+    return segments
+
+
 def cell_outline(cell: tuple[float, float]) -> np.ndarray:
     """(4, 2, 2) edges of the rectangle [0, Lx] x [0, Ly]."""
     lx, ly = cell

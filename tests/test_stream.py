@@ -125,3 +125,15 @@ def test_a_frame_whose_disks_leave_the_box_or_change_in_number_is_a_key_frame():
     page.apply(encoder.encode(fewer, "rotation"))
     assert page.header["key"] and page.header["n"] == 50
     assert_shows(page, fewer, "rotation")
+
+
+def test_a_boxs_walls_meet_at_its_corners_and_frame_the_picture():
+    """The 3D scene draws walls four radii past the disks; the stream sends them ending where they meet."""
+    [frame] = frames_of("ratchet16", 1, 10)
+    header, _ = unpack(Encoder().encode(frame, "rotation"))
+    walls = np.array(header["walls"]).reshape(-1, 2, 2)
+    corners, counts = np.unique(walls.reshape(-1, 2).round(9), axis=0, return_counts=True)
+    assert len(walls) == 4 and len(corners) == 4 and np.all(counts == 2)
+    xmin, xmax, ymin, ymax = header["bounds"]
+    assert (xmin, ymin) == pytest.approx(tuple(corners.min(axis=0))) and \
+        (xmax, ymax) == pytest.approx(tuple(corners.max(axis=0)))

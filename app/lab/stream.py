@@ -2,7 +2,7 @@
 
 viser sends each array whole, as float32, and encodes each message once per client: at 5600
 disks the positions alone are 5.4 Mbit/s at 10 frames/s a viewer. The viewers' pages draw the
-scene on a 2D canvas instead (``viewer_scene.html``), fed by this stream:
+scene on a 2D canvas instead (``static/viewer/scene.html``), fed by this stream:
 
 - positions quantised to 16 bits in a box around the picture (kept while the picture stays in it
   and fills most of it), an angle and a colour (the row of the colour field's palette) a byte each;
@@ -21,6 +21,7 @@ padded to 4 bytes. A page applies messages in ``seq`` order and reopens its sock
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 import threading
@@ -30,6 +31,8 @@ import zlib
 import numpy as np
 import tornado.web
 import tornado.websocket
+
+from granlab.engine.frames import meeting_walls
 
 from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, PALETTES, SPOKE_COLOR,
                              WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes, frame_bounds)
@@ -45,8 +48,6 @@ BOX_FILL = 0.7
 
 LEVEL = 6
 """zlib's level: at 5600 disks about 1 ms a frame on this machine class."""
-
-DTYPES = {"u1": np.uint8, "u2": np.uint16, "i4": np.int32, "u4": np.uint32, "f4": np.float32}
 
 
 def _hex(rgb) -> str:
@@ -100,11 +101,13 @@ class Encoder:
         self._header: dict = {}
         self._index = np.zeros(0, dtype=np.intp)
         self._scratch = np.zeros(0)
+        self._key: tuple[int, bytes] | None = None  # the last key frame made, by seq
 
     def encode(self, frame, field: str) -> bytes:
         """The message that brings a page from the last frame to ``frame`` coloured by ``field``."""
         with self._lock:
             n = len(frame.radii)
+            frame = dataclasses.replace(frame, walls=_meeting(frame))
             bounds = frame_bounds(frame)
             key = (not self._state or len(self._state["radius"]) != n or field != self._field
                    or not self._box_holds(bounds))
@@ -130,6 +133,12 @@ class Encoder:
             return self._keyframe() if self._state else None
 
     def _keyframe(self) -> bytes:
+        """Made once per frame, whoever asks for it (a class joining at once)."""
+        if self._key is None or self._key[0] != self.seq:
+            self._key = (self.seq, self._make_keyframe())
+        return self._key[1]
+
+    def _make_keyframe(self) -> bytes:
         s = self._state
         parts = [(name, s[name], "abs") for name in ("pos", "angle", "color", "radius", "ci", "cj", "cls", "far")]
         header = {**self._header, "seq": self.seq, "key": True, "field": self._field,
@@ -214,6 +223,19 @@ class Encoder:
                 "watched": rounded(frame.watched), "watchedIndex": [int(k) for k in frame.watched_index],
                 "labels": [[text, round(x, 7), round(y, 7)] for text, x, y in frame.labels],
                 "meanRadius": float(frame.radii.mean()) if len(frame.radii) else 1.0}
+
+
+def _meeting(frame) -> np.ndarray:
+    """The frame's walls ending where they meet (the 3D scene's run four radii past the disks, and
+    the picture, framed on them, shows the packing smaller: on a phone, half its width)."""
+    walls = frame.walls
+    if not len(walls) or not len(frame.radii):
+        return walls
+    tangents = walls[:, 1] - walls[:, 0]
+    tangents /= np.linalg.norm(tangents, axis=1)[:, None]
+    normals = np.column_stack([tangents[:, 1], -tangents[:, 0]])
+    met = meeting_walls(normals, np.einsum("ij,ij->i", normals, walls[:, 0]), frame.positions, frame.radii)
+    return met[~np.isnan(met).any(axis=(1, 2))]
 
 
 def _among(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
@@ -301,3 +323,5 @@ class StreamSocket(tornado.websocket.WebSocketHandler):
 
     def _sent(self, future) -> None:
         self.sending = False
+        if future.exception() is not None:  # the page went while this was on its way
+            self.stream.closed(self)

@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 
 from granlab.engine.analysis.ratchet import strain_fit
-from granlab.engine.frames import cell_outline, group_labels
+from granlab.engine.frames import cell_outline, group_labels, meeting_walls
 from granlab.engine.io import h5md
 from granlab.engine.observables import coordination, solid_fraction
 from granlab.engine.params import TANGENTIAL
@@ -354,28 +354,10 @@ def _travels(bounds: np.ndarray) -> bool:
 
 def _walls(raw: dict, normals: np.ndarray, scene) -> np.ndarray:
     """(W, 2, 2) each wall as a segment across the disks and the other walls, ending where they end
-    (the lab's scene draws them four radii past the disks: a box's walls then cross at its corners,
+    (the lab's 3D scene draws them four radii past the disks: a box's walls then cross at its corners,
     and the packing is drawn smaller for it); NaN where a wall misses that region."""
     offsets = np.asarray(raw.get("wall_position", np.zeros(len(normals))), dtype=float)
-    lo = (scene.positions - scene.radii[:, None]).min(axis=0)
-    hi = (scene.positions + scene.radii[:, None]).max(axis=0)
-    for normal, offset in zip(normals, offsets):
-        for axis in range(2):
-            if abs(abs(normal[axis]) - 1.0) < 1e-12:  # a wall across this axis bounds the region along it
-                lo[axis], hi[axis] = min(lo[axis], offset * normal[axis]), max(hi[axis], offset * normal[axis])
-    segments = np.full((len(normals), 2, 2), np.nan)
-    for k, (normal, offset) in enumerate(zip(normals, offsets)):
-        point, tangent = offset * normal, np.array([-normal[1], normal[0]])
-        ends = [-np.inf, np.inf]
-        for axis in range(2):
-            if abs(tangent[axis]) > 1e-12:
-                a, b = sorted(((lo[axis] - point[axis]) / tangent[axis], (hi[axis] - point[axis]) / tangent[axis]))
-                ends = [max(ends[0], a), min(ends[1], b)]
-            elif not lo[axis] <= point[axis] <= hi[axis]:
-                ends = [1.0, 0.0]
-        if ends[0] < ends[1]:
-            segments[k] = [point + ends[0] * tangent, point + ends[1] * tangent]
-    return segments
+    return meeting_walls(normals, offsets, scene.positions, scene.radii)
 
 
 def _bounds(scene, walls: np.ndarray, labels) -> tuple[float, float, float, float]:
