@@ -11,6 +11,7 @@ import pytest
 from playwright.sync_api import expect
 
 from granlab.app.lab import lessons
+from granlab.app.lab.dashboard import SPEEDS
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
 from tests.test_browser import http_status, lab_only, open_dashboard, status, wait_model, wait_status
@@ -247,6 +248,9 @@ def test_each_control_works_from_the_keyboard(browser, lab):
         focus(page, f".speed-{name} button")
         press("Enter")
         wait_status(lab, lambda s: speed(s) == PRESETS["ratchet16"].speeds[name])
+    # the slider shows the named speed at the page's next refresh: an arrow before it would move from the last one
+    normal = str(float(list(SPEEDS).index("0.5")))  # the slider's value is the speed's place in SPEEDS
+    expect(page.locator(".speed-slider .noUi-handle")).to_have_attribute("aria-valuenow", normal)
     focus(page, ".speed-slider .noUi-handle")
     press("ArrowRight")
     wait_status(lab, lambda s: speed(s) == 1.0)
