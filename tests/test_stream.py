@@ -137,3 +137,36 @@ def test_a_boxs_walls_meet_at_its_corners_and_frame_the_picture():
     xmin, xmax, ymin, ymax = header["bounds"]
     assert (xmin, ymin) == pytest.approx(tuple(corners.min(axis=0))) and \
         (xmax, ymax) == pytest.approx(tuple(corners.max(axis=0)))
+
+
+class FakeSocket:
+    def __init__(self):
+        self.in_flight = 0
+        self.received: list[bytes] = []
+
+    def send(self, message: bytes) -> None:
+        self.received.append(message)
+
+
+def test_a_page_too_far_behind_misses_frames_then_catches_up_with_a_key_frame():
+    from granlab.app.lab.stream import MAX_IN_FLIGHT, ViewerStream
+
+    stream = ViewerStream()
+    frames = list(frames_of("ratchet16", 6, 50))
+    quick, slow = FakeSocket(), FakeSocket()
+    stream._send(stream.encoder.encode(frames[0], "rotation"))  # before any page: nobody gets it
+    stream.opened(quick)
+    stream.opened(slow)
+    slow.in_flight = MAX_IN_FLIGHT
+    for frame in frames[1:4]:
+        stream._send(stream.encoder.encode(frame, "rotation"))
+    slow.in_flight = 0
+    for frame in frames[4:]:
+        stream._send(stream.encoder.encode(frame, "rotation"))
+    assert len(quick.received) == 6 and len(slow.received) == 3  # its key frame, then the last 2 as the others
+    pages = [Page(), Page()]
+    for page, socket in zip(pages, (quick, slow)):
+        for message in socket.received:
+            page.apply(message)
+        assert_shows(page, frames[-1], "rotation")
+    assert [unpack(m)[0]["key"] for m in slow.received] == [True, True, False]

@@ -37,6 +37,11 @@ from granlab.engine.frames import meeting_walls
 from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, PALETTES, SPOKE_COLOR,
                              WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes, frame_bounds)
 
+MAX_IN_FLIGHT = 8
+"""Messages a socket may have on their way (written, not yet handed to the network) before it
+misses the next ones and gets a key frame once it has caught up: a busy server loop completes the
+writes of one message only after the next is queued, and a page on a slow network falls behind."""
+
 STREAM_RATE = 20.0
 """Frames per second at most on the viewers' stream (the presenter's 3D scene draws up to 30)."""
 
@@ -249,7 +254,7 @@ def _among(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
 class ViewerStream:
     """The encoder and the open viewers' sockets: ``publish`` (the scene's thread) encodes a frame
     at most ``STREAM_RATE`` times a second and hands it to the server's loop, which writes it to
-    every socket whose last message has gone; one still sending gets a key frame once it has."""
+    every socket not too far behind; one that is gets a key frame once it has caught up."""
 
     def __init__(self, io_loop=None):
         self.encoder = Encoder()
@@ -269,7 +274,7 @@ class ViewerStream:
     def _send(self, message: bytes) -> None:
         self.messages += 1
         for socket, missed in list(self.sockets.items()):
-            if socket.sending:
+            if socket.in_flight >= MAX_IN_FLIGHT:
                 self.sockets[socket] = True
                 continue
             if missed:
@@ -296,7 +301,7 @@ class StreamSocket(tornado.websocket.WebSocketHandler):
     def initialize(self, stream: ViewerStream, admit):
         self.stream = stream
         self.admit = admit
-        self.sending = False
+        self.in_flight = 0
 
     def prepare(self):
         if not self.admit(self):
@@ -312,16 +317,16 @@ class StreamSocket(tornado.websocket.WebSocketHandler):
         pass
 
     def send(self, message: bytes) -> None:
-        """Write ``message``; ``sending`` until it has gone to the socket."""
+        """Write ``message``, counted ``in_flight`` until it has gone to the network."""
         try:
             future = self.write_message(message, binary=True)
         except tornado.websocket.WebSocketClosedError:
             self.stream.closed(self)
             return
-        self.sending = True
+        self.in_flight += 1
         future.add_done_callback(self._sent)
 
     def _sent(self, future) -> None:
-        self.sending = False
+        self.in_flight -= 1
         if future.exception() is not None:  # the page went while this was on its way
             self.stream.closed(self)
