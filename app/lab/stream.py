@@ -52,7 +52,8 @@ BOX_FILL = 0.7
 """A new box (a key frame) once the picture spans less than this fraction of the box along an axis."""
 
 LEVEL = 6
-"""zlib's level: at 5600 disks about 1 ms a frame on this machine class."""
+"""zlib's level: a change of a 5600-disk frame in 6.6 ms, 8.2 kB (level 1: 3.7 ms, 10.0 kB), the
+compression outside the GIL."""
 
 
 def _hex(rgb) -> str:
