@@ -170,3 +170,19 @@ def test_a_page_too_far_behind_misses_frames_then_catches_up_with_a_key_frame():
             page.apply(message)
         assert_shows(page, frames[-1], "rotation")
     assert [unpack(m)[0]["key"] for m in slow.received] == [True, True, False]
+
+
+def test_a_frame_of_a_diverging_run_is_refused_and_the_stream_goes_on_from_the_last_good_one():
+    import dataclasses
+
+    encoder = Encoder()
+    first, second = frames_of("ratchet16", 2, 50)
+    page = Page()
+    page.apply(encoder.encode(first, "rotation"))
+    broken = first.positions.copy()
+    broken[3] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        encoder.encode(dataclasses.replace(first, positions=broken), "rotation")
+    page.apply(encoder.encode(second, "rotation"))
+    assert not page.header["key"]
+    assert_shows(page, second, "rotation")

@@ -110,7 +110,10 @@ class Encoder:
         self._key: tuple[int, bytes] | None = None  # the last key frame made, by seq
 
     def encode(self, frame, field: str) -> bytes:
-        """The message that brings a page from the last frame to ``frame`` coloured by ``field``."""
+        """The message that brings a page from the last frame to ``frame`` coloured by ``field``; a
+        ValueError, and the stream as it was, for a frame whose disks are not all at finite places."""
+        if not (np.isfinite(frame.positions).all() and np.isfinite(frame.radii).all()):
+            raise ValueError("a frame with disks at non-finite places (a diverging run) is not sent to viewers")
         with self._lock:
             n = len(frame.radii)
             frame = dataclasses.replace(frame, walls=_meeting(frame))
@@ -269,7 +272,10 @@ class ViewerStream:
         if self.io_loop is None or now - self._last < 1.0 / STREAM_RATE:
             return
         self._last = now
-        message = self.encoder.encode(frame, field)
+        try:
+            message = self.encoder.encode(frame, field)
+        except ValueError:  # the pages keep the last frame they could draw
+            return
         self.io_loop.add_callback(self._send, message)
 
     def _send(self, message: bytes) -> None:
