@@ -388,8 +388,8 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     # each figure's change may come in a message of its own: every one is waited for, none read once
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
     wait_model(page, "figure-coulomb-cone", "m.below[0].axis_label_text_font_size == '17px'")
-    widths = ("JSON.stringify(m.renderers.map(r => r.glyph.line_width).map(w => typeof w == 'number' ? w : w && w.value)"
-              ".filter(w => typeof w == 'number'))")
+    widths = ("JSON.stringify(m.renderers.map(r => r.glyph.line_width)"
+              ".map(w => typeof w == 'number' ? w : w && w.value).filter(w => typeof w == 'number'))")
     # the cone's dashed line, the contacts' paths and the three markers' outlines (plots.py), twice as thick
     thin, thick = f"{widths} == '[1.5,2,1,1,1]'", f"{widths} == '[3,4,2,2,2]'"
     wait_model(page, "figure-coulomb-cone", thick)
@@ -466,8 +466,10 @@ def viewer_scene(page):
 
 
 PAINTED = """() => { const c = document.querySelector("canvas"), d = c.getContext("2d").getImageData(0, 0, c.width,
-  c.height).data; let k = 0; for (let i = 0; i < d.length; i += 4) if (d[i] < 240 || d[i + 1] < 240 || d[i + 2] < 240) k++;
+  c.height).data; let k = 0;
+  for (let i = 0; i < d.length; i += 4) if (d[i] < 240 || d[i + 1] < 240 || d[i + 2] < 240) k++;
   return k / (d.length / 4) }"""
+"""The share of a viewer's 2D scene that is not white."""
 
 
 def stream_handshake(url: str, origin: str) -> int:

@@ -12,9 +12,10 @@ report (viser counts a client as connected from its first one; a browser sends i
 Counted per socket from outside the server: websocket messages and bytes received (neither
 server compresses its websocket: these are the bytes on the wire, less the frames' few bytes of
 header), and on the scene's socket the frames, a frame being a message of the viewers' stream or
-one of viser's that moves the disks (viser sends nothing for an unchanged value). The presenter changes the load's period through
-its own bokeh websocket, as its page's input box does, and the latency runs from that message to
-the value in ``/status``. Only this module's imports are loaded: the clients' process stays small.
+one of viser's that moves the disks (viser sends nothing for an unchanged value). The presenter
+changes the load's period through its own bokeh websocket, as its page's input box does, and the
+latency runs from that message to the value in ``/status``. Only this module's imports are loaded:
+the clients' process stays small.
 """
 
 from __future__ import annotations
