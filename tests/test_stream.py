@@ -51,7 +51,8 @@ class Page:
 
     def positions(self) -> np.ndarray:
         x0, y0, sx, sy = self.header["box"]
-        return np.column_stack([x0 + sx * self.a["pos"][0::2], y0 + sy * self.a["pos"][1::2]])
+        x, y = self.a["pos"].reshape(2, -1)
+        return np.column_stack([x0 + sx * x, y0 + sy * y])
 
     def contacts(self) -> dict:
         """(i, j) -> (class byte, wall point or None)."""
@@ -186,3 +187,27 @@ def test_a_frame_of_a_diverging_run_is_refused_and_the_stream_goes_on_from_the_l
     page.apply(encoder.encode(second, "rotation"))
     assert not page.header["key"]
     assert_shows(page, second, "rotation")
+
+
+class FakeLoop:
+    def __init__(self):
+        self.sent: list[bytes] = []
+
+    def add_callback(self, function, message: bytes) -> None:
+        self.sent.append(message)
+
+
+@pytest.mark.parametrize("size, rate", [(600, 20.0), (30_000, 11.0)])
+def test_the_stream_sends_as_many_frames_as_its_budget_allows_within_its_rates(monkeypatch, size, rate):
+    """A scene's frame every 45 ms for 10 s: frames of a few hundred bytes go at the most rate, frames
+    whose rate would pass the budget at the least (not one scene frame in two: 11.1 a second)."""
+    import granlab.app.lab.stream as stream_module
+
+    clock = [100.0]
+    monkeypatch.setattr(stream_module.time, "monotonic", lambda: clock[0])
+    stream = stream_module.ViewerStream(io_loop=FakeLoop())
+    monkeypatch.setattr(stream.encoder, "encode", lambda frame, field: b"x" * size)
+    for _ in range(round(10.0 / 0.045)):
+        stream.publish(None, "rotation")
+        clock[0] += 0.045
+    assert len(stream.io_loop.sent) / 10.0 == pytest.approx(rate, rel=0.08)

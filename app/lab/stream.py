@@ -4,19 +4,26 @@ viser sends each array whole, as float32, and encodes each message once per clie
 disks the positions alone are 5.4 Mbit/s at 10 frames/s a viewer. The viewers' pages draw the
 scene on a 2D canvas instead (``static/viewer/scene.html``), fed by this stream:
 
-- positions quantised to 16 bits in a box around the picture (kept while the picture stays in it
-  and fills most of it), an angle and a colour (the row of the colour field's palette) a byte each;
+- positions quantised to 14 bits in a box around the picture (kept while the picture stays in it
+  and fills most of it; a tenth of a pixel on a 1920-pixel canvas), the x of every disk then every y;
+  an angle and a colour (the row of the colour field's palette) a byte each;
 - contacts as pairs of disks (a negative partner for a wall's point, whose position is sent) with a byte of force
   class and kind;
 - each frame as the change from the last one: the disks' arrays as differences modulo 2¹⁶ or 2⁸,
-  the contacts as those gone and those added, then the change of each one's byte;
+  the contacts as those gone (the steps between their ascending rows) and those added (sorted by
+  their first disk: the steps between those, and each second disk less its first), then the change of each
+  one's byte;
 - a key frame (every array whole) to a page that opens, or falls behind, or when the box, the
   number of disks or the colour field changes;
-- the whole message compressed with zlib once (the page inflates it with DecompressionStream).
+- 16-bit arrays as their low bytes then their high bytes (small changes leave the high bytes 0 or 255),
+  the whole message compressed with zlib once (the page inflates it with DecompressionStream).
+
+At 5600 disks in compression, frames 200 steps apart: a change 10.8 kB with 16-bit positions, x and
+y interleaved, contacts unsorted; 7.3 kB so.
 
 A message: a 4-byte little-endian header length, the header (JSON: ``seq``, ``key``, ``parts``
-naming each array, its dtype, length and mode, and the frame's few floats), then the arrays, each
-padded to 4 bytes. A page applies messages in ``seq`` order and reopens its socket at a gap.
+naming each array, its dtype, length, mode and coding, and the frame's few floats), then the
+arrays, each padded to 4 bytes. A page applies messages in ``seq`` order and reopens its socket at a gap.
 """
 
 from __future__ import annotations
@@ -42,8 +49,16 @@ MAX_IN_FLIGHT = 8
 misses the next ones and gets a key frame once it has caught up: a busy server loop completes the
 writes of one message only after the next is queued, and a page on a slow network falls behind."""
 
-STREAM_RATE = 20.0
-"""Frames per second at most on the viewers' stream (the presenter's 3D scene draws up to 30)."""
+STREAM_RATES = (11.0, 20.0)
+"""Frames per second on the viewers' stream, at least (while the scene has them) and at most (the
+presenter's 3D scene draws up to 30)."""
+
+STREAM_BUDGET = 100_000
+"""Bytes per second the stream may take, a viewer, above its least rate: 0.8 Mbit/s, and frames of a
+few hundred bytes (256 disks) go at the most rate; a 5600-disk compression's frames of 10 kB at the least."""
+
+LEVELS = 2 ** 14 - 1
+"""The positions' quantisation: the box's side in quanta."""
 
 BOX_MARGIN = 0.05
 """The quantisation box reaches this fraction of the picture's size past it on each side."""
@@ -67,16 +82,26 @@ def style() -> dict:
             "classes": FORCE_CLASSES, "forceWidth": MAX_FORCE_THICKNESS, "watchedWidth": WATCHED_THICKNESS}
 
 
-def _pack(header: dict, parts: list[tuple[str, np.ndarray, str]]) -> bytes:
-    """One message: header and arrays, compressed."""
-    header["parts"] = [[name, array.dtype.str[1:], int(array.size), mode] for name, array, mode in parts]
+def _pack(header: dict, parts: list[tuple]) -> bytes:
+    """One message: header and arrays (name, array, mode and optionally coding: "steps" or "less ci"),
+    compressed."""
+    header["parts"] = [[name, array.dtype.str[1:], int(array.size), mode, coding[0] if coding else ""]
+                       for name, array, mode, *coding in parts]
     text = json.dumps(header, separators=(",", ":")).encode()
     text += b" " * (-len(text) % 4)
     chunks = [struct.pack("<I", len(text)), text]
-    for _, array, _ in parts:
-        data = np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<"), copy=False).tobytes()
+    for _, array, *_ in parts:
+        data = np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<"), copy=False)
+        if data.dtype.itemsize == 2:
+            data = data.view(np.uint8).reshape(-1, 2).T
+        data = data.tobytes()
         chunks.append(data + b"\0" * (-len(data) % 4))
     return zlib.compress(b"".join(chunks), LEVEL)
+
+
+def _steps(ascending: np.ndarray) -> np.ndarray:
+    """An ascending list as the steps between its values (the first from 0)."""
+    return np.diff(ascending, prepend=ascending.dtype.type(0)).astype(ascending.dtype)
 
 
 def unpack(message: bytes) -> tuple[dict, dict[str, tuple[np.ndarray, str]]]:
@@ -85,10 +110,19 @@ def unpack(message: bytes) -> tuple[dict, dict[str, tuple[np.ndarray, str]]]:
     (length,) = struct.unpack_from("<I", data)
     header = json.loads(data[4:4 + length])
     offset, arrays = 4 + length, {}
-    for name, dtype, count, mode in header["parts"]:
-        array = np.frombuffer(data, dtype=np.dtype(dtype).newbyteorder("<"), count=count, offset=offset)
+    for name, dtype, count, mode, coding in header["parts"]:
+        kind = np.dtype(dtype).newbyteorder("<")
+        size = count * kind.itemsize
+        raw = np.frombuffer(data, dtype=np.uint8, count=size, offset=offset)
+        if kind.itemsize == 2:
+            raw = raw.reshape(2, -1).T.copy()
+        array = raw.view(kind).ravel()
+        if coding == "steps":
+            array = np.cumsum(array, dtype=kind)
+        elif coding == "less ci":
+            array = array + arrays["ci"][0]
         arrays[name] = (array, mode)
-        offset += array.nbytes + (-array.nbytes % 4)
+        offset += size + (-size % 4)
     return header, arrays
 
 
@@ -166,18 +200,19 @@ class Encoder:
         if np.any(sorted_new[1:] == sorted_new[:-1]):  # the same pair twice (two images in a tiny cell)
             return [(name, state[name], "abs") for name in ("ci", "cj", "cls", "far")]
         kept = _among(old, sorted_new)
-        added = ~_among(new, np.sort(old))
-        order = np.concatenate([old[kept], new[added]])
+        added = np.sort(new[~_among(new, np.sort(old))])  # by first disk, then second
+        order = np.concatenate([old[kept], added])
         rows = by_code[np.searchsorted(sorted_new, order)]  # each of the page's rows in this frame
         for name in ("code", "ci", "cj", "cls"):
             state[name] = state[name][rows]
         state["far"] = state["far"].reshape(-1, 2)[rows].ravel()
-        base_cls = np.concatenate([previous["cls"][kept], np.zeros(added.sum(), dtype=np.uint8)])
+        base_cls = np.concatenate([previous["cls"][kept], np.zeros(len(added), dtype=np.uint8)])
         base_far = np.concatenate([previous["far"].reshape(-1, 2)[kept].ravel(),
-                                   np.zeros(2 * added.sum(), dtype=np.uint16)])
-        return [("gone", np.flatnonzero(~kept).astype(np.uint32), "abs"),
-                ("ci", state["ci"][len(order) - added.sum():], "append"),
-                ("cj", state["cj"][len(order) - added.sum():], "append"),
+                                   np.zeros(2 * len(added), dtype=np.uint16)])
+        first, second = state["ci"][len(order) - len(added):], state["cj"][len(order) - len(added):]
+        return [("gone", _steps(np.flatnonzero(~kept).astype(np.uint32)), "abs", "steps"),
+                ("ci", _steps(first), "append", "steps"),
+                ("cj", second - first, "append", "less ci"),
                 ("cls", state["cls"] - base_cls, "delta"),
                 ("far", state["far"] - base_far, "delta")]
 
@@ -191,7 +226,7 @@ class Encoder:
         far = np.zeros((m, 2), dtype=np.uint16)
         far[wall] = self._quantise(frame.contacts[wall, 1])
         kind = np.clip(frame.contact_kind, 0, len(CONTACT_KINDS) - 1).astype(np.intp)
-        return {"pos": self._quantise(frame.positions).ravel(),
+        return {"pos": self._quantise(frame.positions).T.ravel(),
                 "angle": (np.floor(np.mod(frame.angles, 2.0 * np.pi) * (256 / (2.0 * np.pi))).astype(np.int64)
                           % 256).astype(np.uint8),
                 "color": self._index.astype(np.uint8), "radius": frame.radii.astype(np.float32),
@@ -203,8 +238,8 @@ class Encoder:
     def _quantise(self, points: np.ndarray) -> np.ndarray:
         x0, y0, sx, sy = self._box
         q = np.empty(np.shape(points), dtype=np.uint16)
-        q[..., 0] = np.clip(np.rint((points[..., 0] - x0) / sx), 0, 65535)
-        q[..., 1] = np.clip(np.rint((points[..., 1] - y0) / sy), 0, 65535)
+        q[..., 0] = np.clip(np.rint((points[..., 0] - x0) / sx), 0, LEVELS)
+        q[..., 1] = np.clip(np.rint((points[..., 1] - y0) / sy), 0, LEVELS)
         return q
 
     @staticmethod
@@ -212,13 +247,13 @@ class Encoder:
         xmin, xmax, ymin, ymax = bounds
         size = max(xmax - xmin, ymax - ymin, 1e-12)
         pad = BOX_MARGIN * size
-        return (xmin - pad, ymin - pad, (xmax - xmin + 2 * pad) / 65535, (ymax - ymin + 2 * pad) / 65535)
+        return (xmin - pad, ymin - pad, (xmax - xmin + 2 * pad) / LEVELS, (ymax - ymin + 2 * pad) / LEVELS)
 
     def _box_holds(self, bounds) -> bool:
         if self._box is None:
             return False
         x0, y0, sx, sy = self._box
-        x1, y1 = x0 + 65535 * sx, y0 + 65535 * sy
+        x1, y1 = x0 + LEVELS * sx, y0 + LEVELS * sy
         xmin, xmax, ymin, ymax = bounds
         inside = x0 <= xmin and xmax <= x1 and y0 <= ymin and ymax <= y1
         return inside and xmax - xmin >= BOX_FILL * (x1 - x0) and ymax - ymin >= BOX_FILL * (y1 - y0)
@@ -257,25 +292,31 @@ def _among(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
 
 class ViewerStream:
     """The encoder and the open viewers' sockets: ``publish`` (the scene's thread) encodes a frame
-    at most ``STREAM_RATE`` times a second and hands it to the server's loop, which writes it to
-    every socket not too far behind; one that is gets a key frame once it has caught up."""
+    at the rate :data:`STREAM_BUDGET` allows within :data:`STREAM_RATES` and hands it to the
+    server's loop, which writes it to every socket not too far behind; one that is gets a key frame
+    once it has caught up."""
 
     def __init__(self, io_loop=None):
         self.encoder = Encoder()
         self.io_loop = io_loop
         self.sockets: dict["StreamSocket", bool] = {}  # socket -> whether it missed a message
         self.messages = 0
-        self._last = 0.0
+        self._due = 0.0
+        self._size = 0.0  # of a message, a running mean
 
     def publish(self, frame, field: str) -> None:
         now = time.monotonic()
-        if self.io_loop is None or now - self._last < 1.0 / STREAM_RATE:
+        if self.io_loop is None or now < self._due:
             return
-        self._last = now
         try:
             message = self.encoder.encode(frame, field)
         except ValueError:  # the pages keep the last frame they could draw
             return
+        self._size += 0.2 * (len(message) - self._size)
+        least, most = STREAM_RATES
+        interval = min(1.0 / least, max(1.0 / most, self._size / STREAM_BUDGET))
+        # due on a grid: a scene's frames coming every 45 ms give 11 frames/s, not one in two
+        self._due = max(self._due + interval, now - 0.5 * interval)
         self.io_loop.add_callback(self._send, message)
 
     def _send(self, message: bytes) -> None:
