@@ -333,7 +333,7 @@ def _study(args) -> dict:
     for amplitude in args.amplitude:
         study = RatchetStudy(particles=args.particles, samples=args.samples, cycles=args.cycles, models=models,
                              amplitude=amplitude, period=args.period,
-                             phase=None if args.phase is None else math.radians(args.phase),
+                             phase=None if args.phase is None else math.radians(args.phase), zero_mean=args.zero_mean,
                              friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
                              gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
         out = str(Path(args.out) / f"amplitude-{amplitude:g}") if sweep and args.out else args.out
@@ -355,13 +355,17 @@ def _print_study(result: dict) -> None:
         for one in result["results"]:
             print(f"amplitude Delta sigma / P0 = {one['settings']['amplitude']:g}:")
             _print_study(one)
-        print(f"{'amplitude':>9}  {'model':<16}{'ratcheting':>11}{'without jumps':>15}  |dgamma| geometric mean (range)")
+        print(f"{'amplitude':>9}  {'model':<16}{'ratcheting':>11} {'(95 %, %)':<10}{'negative':>9} {'(95 %, %)':<10}"
+              f"{'without jumps':>13}  |dgamma| geometric mean (range)")
         for one in result["results"]:
             for model, data in one["models"].items():
                 spread = "-" if not data["geomean_abs_dgamma"] else (
                     f"{data['geomean_abs_dgamma']:.3g} ({data['range_abs_dgamma'][0]:.3g}..{data['range_abs_dgamma'][1]:.3g})")
-                print(f"{one['settings']['amplitude']:>9g}  {model:<16}{data['ratcheting']:>6}/{data['completed']:<4}"
-                      f"{data['ratcheting_without_outliers']:>10}/{data['completed']:<4}  {spread}")
+                paper = data["rules"][0]
+                print(f"{one['settings']['amplitude']:>9g}  {model:<16}{data['ratcheting']:>6}/{data['completed']:<4} "
+                      f"{_percent(paper['ratcheting_interval']):<10}{data['negative']:>5}/{data['ratcheting']:<3} "
+                      f"{_percent(paper['negative_interval']):<10}"
+                      f"{data['ratcheting_without_outliers']:>8}/{data['completed']:<4}  {spread}")
         print(f"total {result['wall_time_s']:.1f} s")
         return
     settings = result["settings"]
@@ -375,11 +379,29 @@ def _print_study(result: dict) -> None:
                   f"{data['positive']} positive, {data['negative']} negative", end="")
         print(f"; {data['shakedown']} shakedown, {data['with_outliers']} with outliers "
               f"({data['ratcheting_without_outliers']} ratchet without their jumps)")
+        _print_rules(data["rules"])
         for sample in data["samples"]:
             if sample["error"]:
                 print(f"    seed {sample['seed']} failed: {sample['error']}")
     for failure in result["failed"]:
         print(f"  failed: seed {failure['seed']} ({failure['model']}): {failure['error']}")
+
+
+def _percent(interval) -> str:
+    return "-" if interval is None else f"{100 * interval[0]:.0f}-{100 * interval[1]:.0f}"
+
+
+def _print_rules(rules: list[dict]) -> None:
+    """The share ratcheting and negative under each verdict rule, with Wilson 95 % intervals."""
+    print(f"    {'verdict rule':<48}{'ratcheting':>12} {'(95 %, %)':<10}{'negative':>10} {'(95 %, %)':<10}"
+          f"|dgamma| geometric mean (95 %)")
+    for rule in rules:
+        geomean = "-" if rule["geomean_abs_dgamma"] is None else f"{rule['geomean_abs_dgamma']:.2g}"
+        if rule["geomean_interval"] is not None:
+            geomean += " ({:.2g} .. {:.2g})".format(*rule["geomean_interval"])
+        share, negative = _percent(rule["ratcheting_interval"]), _percent(rule["negative_interval"])
+        print(f"    {rule['rule']:<48}{rule['ratcheting']:>6}/{rule['samples']:<5} {share:<10}"
+              f"{rule['negative']:>5}/{rule['ratcheting']:<4} {negative:<10}{geomean}")
 
 
 _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
@@ -666,6 +688,9 @@ def _add_study(commands) -> None:
     ratchet.add_argument("--period", type=_float, default=10.0, help="cycle period in tau (default 10)")
     ratchet.add_argument("--reference-cycle", type=int,
                          help="cycle defining L0 (default 30 %% of --cycles, at most cycles - 3: 30 of 100)")
+    ratchet.add_argument("--zero-mean", action="store_true",
+                         help="cycle the load about P0 (q = -Delta sigma cos wt): its mean isotropic, not Eq. 1's "
+                              "P0 + Delta sigma on the top wall")
     ratchet.add_argument("--gravity", type=_float, default=0.0, help="weak gravity (Sec. IV B 3)")
     ratchet.add_argument("--seed", type=int, default=0, help="first seed")
     ratchet.add_argument("--watch", type=int, default=0, metavar="K",

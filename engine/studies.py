@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis.ratchet import RatchetVerdict, deviatoric_strain, ratchet_verdict
+from .analysis.ratchet import (VERDICT_RULES, RatchetVerdict, deviatoric_strain, judge, ratchet_verdict,
+                              share_statistics)
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
@@ -43,10 +44,12 @@ class RatchetStudy:
     """The settings of a ratchet study (paper units: box L = 1, pressure p = 1, density 1).
 
     ``dt_factor`` sets ``dt = dt_factor sqrt(m_min / K_n)`` (ratcheting Fig. 14); ``phase`` turns
-    on elliptic loading (Eqs. 4-5); ``gravity`` is the weak gravity of Sec. IV B 3. Run files get
-    every cycle's record and a frame every ``frame_every`` cycles (and at the reference cycle);
-    with ``watch_samples`` > 0, the (F_n, F_t, status) of every contact present when the loading
-    starts, that many times per cycle (the Coulomb-cone paths of ratcheting Figs. 3, 4 and 6).
+    on elliptic loading (Eqs. 4-5); ``zero_mean`` cycles about P0 rather than above it
+    (:class:`~granlab.engine.protocols.cyclic.CyclicLoad`); ``gravity`` is the weak gravity of
+    Sec. IV B 3. Run files get every cycle's record and a frame every ``frame_every`` cycles (and at
+    the reference cycle); with ``watch_samples`` > 0, the (F_n, F_t, status) of every contact present
+    when the loading starts, that many times per cycle (the Coulomb-cone paths of ratcheting Figs. 3,
+    4 and 6).
     """
 
     particles: int = 16
@@ -56,6 +59,7 @@ class RatchetStudy:
     amplitude: float = 0.2
     period: float = 10.0
     phase: float | None = None
+    zero_mean: bool = False
     friction: float = 0.2
     dt_factor: float = 0.2
     reference_cycle: int | None = None
@@ -92,6 +96,13 @@ class RatchetStudy:
         nonnegative("friction", self.friction, allow_inf=True)
         positive("amplitude", self.amplitude)
         nonnegative("gravity", self.gravity)
+        self.load()
+
+
+    def load(self) -> CyclicLoad:
+        """The cyclic load (paper units: P0 = 1)."""
+        return CyclicLoad(pressure=1.0, amplitude=self.amplitude, period=self.period, phase=self.phase,
+                          zero_mean=self.zero_mean)
 
 
 def default_reference_cycle(cycles: int) -> int:
@@ -140,7 +151,7 @@ def cycle_sample(sim, study: RatchetStudy, writer: RunWriter | None = None) -> R
     """Cycle ``sim`` (from :func:`model_sim`) as ``study`` says (load, cycles; ratcheting Sec. IV B);
     with ``writer``, every cycle's record, a frame every ``frame_every`` cycles and the watched
     contacts go into its run file."""
-    load = CyclicLoad(pressure=1.0, amplitude=study.amplitude, period=study.period, phase=study.phase)
+    load = study.load()
 
     def on_cycle(cycle, s, lx, ly):
         if writer is not None:
@@ -190,7 +201,8 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
                             "outlier_cycles": verdict.outlier_cycles,
                             "dgamma_without_outliers": verdict.dgamma_without_outliers,
                             "ratcheting_without_outliers": verdict.ratcheting_without_outliers,
-                            "equilibrated": prepared.equilibrated,
+                            "equilibrated": prepared.equilibrated, "length_x": curve.length_x.tolist(),
+                            "length_y": curve.length_y.tolist(),
                             "run_file": run_file, "wall_time_s": time.perf_counter() - start, "error": None})
         except Exception as error:  # reported per sample: the others go on
             results.append(_failure(study, seed, model, error))
@@ -212,7 +224,10 @@ def _failure(study, seed, model, error) -> dict:
 def summarize(study: RatchetStudy, results: list[dict]) -> dict:
     """Per model: fraction ratcheting, geometric mean and range of |dgamma| over the ratcheting
     samples, count of each sign, how many ratchet once a rattler's jumps are taken out of the
-    series (:class:`granlab.engine.analysis.ratchet.RatchetVerdict`), and the samples."""
+    series (:class:`granlab.engine.analysis.ratchet.RatchetVerdict`), and the samples; ``rules``:
+    under each verdict rule (:data:`~granlab.engine.analysis.ratchet.VERDICT_RULES`, the paper's
+    first), the samples ratcheting and negative with their Wilson 95 % intervals and the geometric
+    mean of |dgamma| with its interval."""
     models = {}
     for model in study.models:
         rows = sorted((r for r in results if r["model"] == model), key=lambda r: r["seed"])
@@ -230,6 +245,9 @@ def summarize(study: RatchetStudy, results: list[dict]) -> dict:
             "shakedown": sum(1 for r in done if r.get("shakedown")),
             "with_outliers": sum(1 for r in done if r.get("outlier_cycles")),
             "ratcheting_without_outliers": sum(1 for r in done if r.get("ratcheting_without_outliers")),
+            "rules": [{"rule": rule.describe(study.cycles, study.reference_cycle), **share_statistics(
+                [judge(r["length_x"], r["length_y"], study.reference_cycle, rule) for r in done])}
+                for rule in VERDICT_RULES],
             "samples": [{k: r.get(k) for k in ("seed", "dgamma", "ratcheting", "rms_deviation", "shakedown",
                                                 "outlier_cycles", "dgamma_without_outliers",
                                                 "ratcheting_without_outliers", "run_file", "error")} for r in rows],

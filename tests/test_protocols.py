@@ -95,6 +95,25 @@ def test_cyclic_load_is_ratcheting_eq1_and_cycles_are_whole_steps(box16):
     assert series.time[-1] - series.time[0] == pytest.approx(30.0, rel=1e-12)
 
 
+def test_a_zero_mean_load_cycles_about_p0_least_at_each_cycle_start(box16):
+    sim = box16.sim.clone()
+    load = CyclicLoad(pressure=1.0, amplitude=0.15, period=10.0, zero_mean=True)
+    start = apply_load(sim, load)
+    from granlab.engine.kernels.integrate import wall_load
+    top, right = sim.wall_index("top"), sim.wall_index("right")
+    lx, ly = sim.box_lengths()
+    w = sim.walls.arrays()
+    times = start + np.linspace(0.0, 10.0, 400, endpoint=False)
+    top_load = np.array([wall_load(w, top, t) for t in times]) / lx
+    assert top_load.mean() == pytest.approx(1.0, abs=1e-12)  # Eq. 1's mean would be 1.15
+    assert top_load.min() == pytest.approx(top_load[0]) == pytest.approx(0.85)
+    assert top_load.max() == pytest.approx(1.15, rel=1e-3)
+    assert wall_load(w, right, start + 2.5) == pytest.approx(ly)
+    assert [load.q(t) for t in (0.0, 5.0)] == pytest.approx([-0.15, 0.15])
+    with pytest.raises(ParameterError, match="amplitude = 1.2 is not allowed: below the pressure P0 = 1"):
+        CyclicLoad(pressure=1.0, amplitude=1.2, zero_mean=True)
+
+
 def _dgamma(base, model, dt_factor=0.2, cycles=40, reference=10, **load):
     sim = base.clone(tangential_model=model)
     sim.set_dt(dt_factor * math.sqrt(sim.particles.mass.min() / sim.law.normal_stiffness))

@@ -32,7 +32,22 @@ def test_tiny_study_runs_on_a_local_dask_cluster(tmp_path):
             assert isinstance(sample["dgamma"], float) and isinstance(sample["ratcheting"], bool)
             info = h5md.summary(sample["run_file"])
             assert info["cycles"] == 13 and info["protocol"]["model"] == model
+        paper = data["rules"][0]
+        assert paper["rule"] == "cycles 2-12, RMS < |Δγ|" and len(data["rules"]) == 7
+        assert (paper["ratcheting"], paper["samples"]) == (data["ratcheting"], 2)
+        low, high = paper["ratcheting_interval"]
+        assert 0.0 <= low <= paper["ratcheting"] / 2 <= high <= 1.0
     assert summary["failed"] == []
+
+
+def test_a_zero_mean_study_cycles_about_p0_and_says_so_in_its_run_files(tmp_path):
+    process = granlab("study", "ratchet", "--particles", "9", "--samples", "1", "--cycles", "4", "--period", "2",
+                      "--reference-cycle", "0", "--amplitude", "0.15", "--zero-mean", "--out", str(tmp_path), "--json")
+    assert process.returncode == 0, process.stderr
+    sample = json.loads(process.stdout)["models"]["cundall-strack"]["samples"][0]
+    assert h5md.summary(sample["run_file"])["protocol"]["zero_mean"] in (True, 1)
+    refused = granlab("study", "ratchet", "--amplitude", "1.5", "--zero-mean")
+    assert refused.returncode != 0 and "amplitude = 1.5 is not allowed: below the pressure P0 = 1" in refused.stderr
 
 
 def test_an_amplitude_sweep_cycles_the_same_samples_at_each_amplitude(tmp_path):
@@ -55,7 +70,7 @@ def test_an_amplitude_sweep_cycles_the_same_samples_at_each_amplitude(tmp_path):
     assert first[0]["protocol"]["amplitude"] == 0.1 and first[1]["protocol"]["amplitude"] == 0.4
     printed = granlab("study", "ratchet", "--particles", "9", "--samples", "1", "--cycles", "4", "--period", "2",
                       "--reference-cycle", "0", "--amplitude", "0.1", "0.2").stdout
-    assert "amplitude  model            ratcheting  without jumps" in printed
+    assert "amplitude  model            ratcheting (95 %, %)  negative (95 %, %) without jumps" in printed
     assert "      0.2  cundall-strack" in printed
 
 

@@ -2,8 +2,9 @@
 
 The top wall carries ``L_x (P0 + q_y(t))`` and the right wall ``L_y (P0 + q_x(t))`` with
 ``q_y = Delta sigma (1 - cos(w t))`` and, for elliptic loading, ``q_x = Delta sigma (1 - cos(w t + phi))``
-(``q_x = 0`` otherwise). Time is counted from the start of the loading, so every cycle starts
-at the minimum of the load, where the wall positions are recorded.
+(``q_x = 0`` otherwise); a zero-mean load subtracts Delta sigma from each cycling q. Time is counted
+from the start of the loading, so every cycle starts at the minimum of the load, where the wall
+positions are recorded.
 """
 
 from __future__ import annotations
@@ -21,12 +22,16 @@ from ..simulation import Simulation
 @dataclass(frozen=True)
 class CyclicLoad:
     """``pressure`` P0, ``amplitude`` Delta sigma, ``period`` T, ``phase`` phi (radians) of the
-    elliptic loading of Eqs. 4-5, or ``None`` for the loading of Eq. 1 (only the top wall cycles)."""
+    elliptic loading of Eqs. 4-5, or ``None`` for the loading of Eq. 1 (only the top wall cycles).
+    ``zero_mean``: ``q = -Delta sigma cos(w t)`` instead, a load whose mean over a cycle is P0 on
+    every wall (Eq. 1's mean is P0 + Delta sigma on the top wall, P0 on the right one), still least at
+    the start of each cycle."""
 
     pressure: float = 1.0
     amplitude: float = 0.2
     period: float = 10.0
     phase: float | None = None
+    zero_mean: bool = False
 
     def __post_init__(self):
         positive("pressure", self.pressure)
@@ -34,10 +39,18 @@ class CyclicLoad:
         positive("period", self.period)
         if self.phase is not None:
             finite("phase", self.phase)
+        if self.zero_mean and not self.amplitude < self.pressure:
+            raise ParameterError("amplitude", self.amplitude, f"below the pressure P0 = {self.pressure:g} for a "
+                                                              f"zero-mean load (the wall's least load is P0 - Δσ)")
 
     def q(self, t: float) -> float:
         """The deviatoric load ``q(t)`` on the top wall, t counted from the start of the loading."""
-        return self.amplitude * (1.0 - math.cos(2.0 * math.pi * t / self.period))
+        return self.amplitude * (1.0 - math.cos(2.0 * math.pi * t / self.period)) - self.offset
+
+    @property
+    def offset(self) -> float:
+        """What the load's base is below P0: Delta sigma for a zero-mean load."""
+        return self.amplitude if self.zero_mean else 0.0
 
 
 @dataclass
@@ -62,10 +75,12 @@ def apply_load(sim: Simulation, load: CyclicLoad, start: float | None = None) ->
     start = sim.time if start is None else start
     omega = 2.0 * math.pi / load.period
     origin = -omega * start
-    sim.set_wall_load("top", Load(base=load.pressure, amplitude=load.amplitude, period=load.period, phase=origin))
+    base = load.pressure - load.offset
+    sim.set_wall_load("top", Load(base=base, amplitude=load.amplitude, period=load.period, phase=origin))
     x_amplitude = 0.0 if load.phase is None else load.amplitude
     x_phase = origin + (0.0 if load.phase is None else load.phase)
-    sim.set_wall_load("right", Load(base=load.pressure, amplitude=x_amplitude, period=load.period, phase=x_phase))
+    x_base = load.pressure if load.phase is None else base
+    sim.set_wall_load("right", Load(base=x_base, amplitude=x_amplitude, period=load.period, phase=x_phase))
     return start
 
 
