@@ -473,7 +473,7 @@ def _print_reproduce(result: dict) -> None:
     if result.get("folder"):
         print(f"  samples in {result['folder']}" + (f", {result['resumed']} of them from before"
                                                     if result["resumed"] else ""))
-    print(f"    {'quantity':<14}{'measured (mean ± s.e.)':<26}{'published':<24}source")
+    print(f"    {'quantity':<20}{'measured (mean ± s.e.)':<26}{'published':<24}source")
     for case in result["cases"]:
         zero = case.get("balanced_at_zero_pressure")
         print(f"  {case['case']}: {case['equilibrated']}/{case['completed']} samples in equilibrium"
@@ -483,17 +483,20 @@ def _print_reproduce(result: dict) -> None:
             measured = "-" if q["mean"] is None else f"{q['mean']:.{digits}f}" + \
                 ("" if q["sem"] is None else f" ± {q['sem']:.{digits}f}") + f" (n = {q['n']})"
             ref = q["published"]
-            print(f"    {name:<14}{measured:<26}{ref['value']:g} ± {ref['error']:g}".ljust(68) + ref["source"])
+            print(f"    {name:<20}{measured:<26}{ref['value']:g} ± {ref['error']:g}".ljust(74) + ref["source"])
         for stage, fit in case.get("averaged_fit", {}).items():
-            suffix = "_0" if stage == "at_zero_pressure" else ""
+            suffix = "_0" if stage.startswith("at_zero_pressure") else ""
+            window = " Hann" if stage.endswith("Hann window") else ""
             if fit["error"]:
-                print(f"    d_F{suffix}, xi{suffix} of I(k) averaged over {fit['samples']} samples: {fit['error']}")
+                print(f"    d_F{suffix}, xi{suffix} of I(k){window} averaged over {fit['samples']} samples: "
+                      f"{fit['error']}")
                 continue
-            for name, digits in (("d_F", 3), ("xi", 2)):
+            for name, digits in (("d_F", 3), ("xi", 2), ("k0", 2)):
                 ref = case["quantities"][name + suffix]["published"]
-                measured = f"{fit[name]:.{digits}f} ± {fit[name + '_error']:.{digits}f} (n = {fit['samples']})"
-                print(f"    {name + suffix + ' <I(k)>':<14}{measured:<25} {ref['value']:g} ± {ref['error']:g}".ljust(68)
-                      + ref["source"])
+                error = f" ± {fit[name + '_error']:.{digits}f}" if name + "_error" in fit else ""
+                measured = f"{fit[name]:.{digits}f}{error} (n = {fit['samples']})"
+                print(f"    {name + suffix + ' <I(k)>' + window:<20}{measured:<25} {ref['value']:g} ± "
+                      f"{ref['error']:g}".ljust(74) + ref["source"])
     for failure in result["failed"]:
         print(f"  failed: {failure['case']}, seed {failure['seed']}: {failure['error']}")
 

@@ -39,7 +39,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .analysis.fractal import FitError, average_series_intensity, fit_structure
+from .analysis.fractal import FitError, average_series_intensity, fit_structure, small_scale_amplitude
 from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
@@ -143,10 +143,21 @@ def published(name: str, case: Case) -> dict[str, Published]:
     rr = 1 if case.rolling else 0
     at_zero = TABLE_IV["A (Phi_I = 0.361 ± 0.007)"]
     at_p = TABLE_V["A (Phi_I = 0.361 ± 0.007)"]
-    return {"phi_0": at_zero[2 * rr], "z_0": at_zero[2 * rr + 1], "phi": at_p[2 * rr], "z": at_p[2 * rr + 1],
-            "d_F_0": TABLE_VII["d_F"][2 * rr], "xi_0": TABLE_VII["xi"][2 * rr],
-            "d_F": TABLE_VII["d_F"][2 * rr + 1], "xi": TABLE_VII["xi"][2 * rr + 1],
-            "hole_radius_w": HOLE_RADIUS[rr]}
+    values = {"phi_0": at_zero[2 * rr], "z_0": at_zero[2 * rr + 1], "phi": at_p[2 * rr], "z": at_p[2 * rr + 1],
+              "d_F_0": TABLE_VII["d_F"][2 * rr], "xi_0": TABLE_VII["xi"][2 * rr],
+              "d_F": TABLE_VII["d_F"][2 * rr + 1], "xi": TABLE_VII["xi"][2 * rr + 1],
+              "hole_radius_w": HOLE_RADIUS[rr], "hole_radius_w8": HOLE_RADIUS[rr]}
+    for suffix in ("_0", ""):
+        values["k0" + suffix] = _published_k0(values["phi" + suffix], values["xi" + suffix], values["d_F" + suffix])
+    return values
+
+
+def _published_k0(phi: Published, xi: Published, d_F: Published) -> Published:
+    """``k0 = Phi (xi/a)^(2 - d_F)`` of published values, its error propagated from theirs (independent)."""
+    k0 = small_scale_amplitude(phi.value, xi.value, d_F.value)
+    relative = math.hypot(phi.error / phi.value, (2.0 - d_F.value) * xi.error / xi.value,
+                          math.log(xi.value) * d_F.error)
+    return Published(round(k0, 3), round(k0 * relative, 3), f"{phi.source}, {xi.source}: Phi (xi/a)^(2 - d_F)")
 
 
 REPRODUCTIONS = {"gilabert-method1": method1_cases, "gilabert-method2": method2_cases}
@@ -156,7 +167,8 @@ is four samples of 1400 disks (and three of 5600, Sec. III B 2). The paper does 
 samples each set of method 1 holds: four as well."""
 QUANTITIES = {
     "gilabert-method1": ("phi", "z"),
-    "gilabert-method2": ("phi_0", "z_0", "d_F_0", "xi_0", "phi", "z", "d_F", "xi", "hole_radius_w"),
+    "gilabert-method2": ("phi_0", "z_0", "d_F_0", "xi_0", "k0_0", "phi", "z", "d_F", "xi", "k0", "hole_radius_w",
+                         "hole_radius_w8"),
 }
 
 
@@ -216,20 +228,31 @@ def coordination(snapshot, cohesive: bool, force_scale: float) -> float:
 
 
 def _fractal(snapshot, prefix: str) -> dict:
+    """The fractal analysis of ``snapshot`` under the default conventions (4-connected holes, the periodic
+    transform) and the other ones (8-connected holes: ``hole_radius_w8``; a Hann window: I(k) and its
+    fit under ``..._hann``), for the docs' comparison of conventions (the paper names none)."""
     from .analysis.fractal import fractal_analysis
 
-    try:
-        result = fractal_analysis(snapshot.positions, snapshot.radii, snapshot.box_lengths)
-    except GranLabError as error:  # a grid that cannot be made leaves the other measurements standing
-        return {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": str(error)}
-    if result.fit_error:
-        values = {f"d_F{prefix}": None, f"xi{prefix}": None, f"fractal_error{prefix}": result.fit_error}
-    else:
-        values = {f"d_F{prefix}": result.d_F, f"xi{prefix}": result.xi}
-    values.update({f"k{prefix}": result.k.tolist(), f"intensity{prefix}": result.intensity.tolist(),
-                   f"grid_phi{prefix}": result.phi})
-    if prefix == "":  # the holes do not depend on the fit
-        values["hole_radius_w"] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
+    values = {}
+    for tag, options in (("", {}), ("_hann", {"connectivity": 8, "transform": "hann"})):
+        try:
+            result = fractal_analysis(snapshot.positions, snapshot.radii, snapshot.box_lengths, **options)
+        except GranLabError as error:  # a grid that cannot be made leaves the other measurements standing
+            values.update({f"d_F{tag}{prefix}": None, f"xi{tag}{prefix}": None,
+                           f"fractal_error{tag}{prefix}": str(error)})
+            continue
+        if result.fit_error:
+            values.update({f"d_F{tag}{prefix}": None, f"xi{tag}{prefix}": None,
+                           f"fractal_error{tag}{prefix}": result.fit_error})
+        else:
+            values.update({f"d_F{tag}{prefix}": result.d_F, f"xi{tag}{prefix}": result.xi,
+                           f"k0{tag}{prefix}": small_scale_amplitude(
+                               result.phi, result.xi / (2.0 * float(snapshot.radii.max())), result.d_F)})
+        values.update({f"k{tag}{prefix}": result.k.tolist(), f"intensity{tag}{prefix}": result.intensity.tolist(),
+                       f"grid_phi{tag}{prefix}": result.phi})
+        if prefix == "":  # the holes do not depend on the fit
+            name = "hole_radius_w" + ("8" if options else "")
+            values[name] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
     return values
 
 
@@ -298,7 +321,9 @@ def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
         if reproduction.name == "gilabert-method2":
             cases[-1]["balanced_at_zero_pressure"] = sum(1 for r in done if r.get("balanced_0"))
             cases[-1]["averaged_fit"] = {"at_zero_pressure": averaged_fit(done, "_0"), "under_pressure":
-                                         averaged_fit(done, "")}
+                                         averaged_fit(done, ""),
+                                         "at_zero_pressure, Hann window": averaged_fit(done, "_hann_0"),
+                                         "under_pressure, Hann window": averaged_fit(done, "_hann")}
     failed = [{"case": r["case"], "seed": r["seed"], "error": r["error"]} for r in rows if r["error"]]
     return {"reproduction": reproduction.name, "settings": asdict(reproduction), "cases": cases,
             "samples": sorted(rows, key=lambda r: (r["case"], r["seed"])), "failed": failed}
@@ -311,7 +336,8 @@ def averaged_fit(rows: list[dict], prefix: str) -> dict:
     on its own bins, the larger boxes alone below the smaller ones' (see
     :func:`granlab.engine.analysis.fractal.average_series_intensity`)."""
     have = [r for r in rows if r.get(f"k{prefix}")]
-    fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "error": None}
+    fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "k0": None,
+           "error": None}
     if not have:
         fit["error"] = "no sample's I(k)"
         return fit
@@ -320,11 +346,13 @@ def averaged_fit(rows: list[dict], prefix: str) -> dict:
     try:
         k, intensity = average_series_intensity([([r[f"k{prefix}"] for r in group],
                                                   [r[f"intensity{prefix}"] for r in group]) for group in groups])
-        result = fit_structure(k, intensity, float(np.mean([r[f"grid_phi{prefix}"] for r in have])), diameter=1.0)
+        phi = float(np.mean([r[f"grid_phi{prefix}"] for r in have]))
+        result = fit_structure(k, intensity, phi, diameter=1.0)
     except (FitError, ParameterError) as error:
         fit["error"] = str(error)
         return fit
-    fit.update(d_F=result.d_F, d_F_error=result.d_F_error, xi=result.xi, xi_error=result.xi_error)
+    fit.update(d_F=result.d_F, d_F_error=result.d_F_error, xi=result.xi, xi_error=result.xi_error,
+               k0=small_scale_amplitude(phi, result.xi, result.d_F))
     return fit
 
 

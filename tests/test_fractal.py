@@ -178,6 +178,47 @@ def test_hole_inside_a_ring_of_disks():
     assert ring - r - spacing < radius[finite][0] < outer + spacing
 
 
+def test_holes_touching_at_a_corner_are_one_with_8_connectivity_also_across_the_periodic_corner():
+    """Two empty squares meeting at a corner inside the grid, two more meeting across the periodic
+    corner, and a diagonal line of empty cells around the box: 4-connected, 2 + 2 holes and every
+    cell of the line alone; 8-connected, two holes of two squares each and one that wraps around
+    the box. A pair of squares of side s = 4 cells about their shared corner: each axis's variance
+    (s² - 1)/12 + s²/4 = 5.25, R_H² = 2 (5.25 + 5.25) = 21 (Eq. 29)."""
+    field = np.ones((60, 60), dtype=np.uint8)
+    field[10:14, 10:14] = field[14:18, 14:18] = 0  # meet at the corner (14, 14)
+    field[56:60, 56:60] = field[0:4, 0:4] = 0  # meet across the periodic corner
+    line = np.arange(20, 80)
+    field[line % 60, (line - 20 + 30) % 60] = 0  # from (20, 30) a step of (1, 1): wraps around the box
+    four_sizes, four = hole_radii(field, 1.0)
+    eight_sizes, eight = hole_radii(field, 1.0, connectivity=8)
+    assert sorted(four_sizes.tolist()) == [1] * 60 + [16] * 4
+    assert sorted(eight_sizes.tolist()) == [32, 32, 60]
+    squares = np.sort(eight[eight_sizes == 32])
+    assert squares == pytest.approx([math.sqrt(21.0)] * 2, rel=1e-9)
+    assert eight[eight_sizes == 60][0] == math.inf
+    with pytest.raises(ParameterError, match="connectivity = 6 is not allowed: 4"):
+        hole_radii(field, 1.0, connectivity=6)
+
+
+def test_a_hann_window_s_intensity_is_the_periodic_one_where_the_window_does_not_reach():
+    """On a random gas (no correlation beyond a disk: I(k) the same in every part of the box), the
+    windowed transform, scaled by the window's mean square, gives the periodic I(k) from ten cells of
+    k on: on average within 3 %, every bin within 20 % (a bin of the lowest k holds a few dozen
+    wavevectors, and the two transforms weigh them differently)."""
+    box = (200.0, 200.0)
+    radii = np.full(4000, 0.5)
+    positions = random_gas(radii, (0.0, box[0], 0.0, box[1]), periodic=(True, True), seed=5)
+    field = density_field(positions, radii, box, 0.1)
+    k, periodic = structure_factor(field, box)
+    k_hann, hann = structure_factor(field, box, transform="hann")
+    assert np.array_equal(k, k_hann)
+    middle = (k > 10 * 2.0 * math.pi / box[0]) & (k < 2.0 * math.pi)
+    ratio = hann[middle] / periodic[middle]
+    assert abs(ratio.mean() - 1.0) < 0.03 and np.abs(ratio - 1.0).max() < 0.2
+    with pytest.raises(ParameterError, match="transform = 'blackman' is not allowed: periodic or hann"):
+        structure_factor(field, box, transform="blackman")
+
+
 def test_mass_average_of_hole_radii():
     """Eq. 30 weights each hole by its cells: for circular holes of radii R1, R2,
     <R>_w = (R1³ + R2³) / (R1² + R2²), not the number average."""

@@ -88,6 +88,11 @@ def test_each_case_gets_its_own_column():
     assert (rr["phi_0"].value, rr["z_0"].value, rr["phi"].value, rr["z"].value) == (0.361, 2.660, 0.524, 2.973)
     assert (rr["d_F_0"].value, rr["xi_0"].value, rr["d_F"].value, rr["xi"].value) == (1.53, 9.3, 1.51, 5.06)
     assert published("gilabert-method2", Case(True, 0.5, False))["hole_radius_w"] == Published(6.6, 0.2, "Sec. V D")
+    # k0 = Phi (xi/a)^(2 - d_F) of Tables IV, V and VII: 0.361 * 9.3^0.47, 0.524 * 5.06^0.49, ...
+    no_rr = published("gilabert-method2", Case(True, 0.5, False))
+    assert [q["k0_0"].value for q in (rr, no_rr)] + [q["k0"].value for q in (rr, no_rr)] == pytest.approx(
+        [1.030, 0.424, 1.160, 0.536], abs=1e-3)
+    assert 0.05 < rr["k0_0"].error / rr["k0_0"].value < 0.15  # mostly d_F's error bar: ln 9.3 * 0.04
     assert len({(c.friction, c.rolling) for c in Reproduction("gilabert-method1").cases}) == len(METHOD1_COLUMNS)
 
 
@@ -119,6 +124,8 @@ def test_dask_gives_the_numbers_of_a_serial_run(capsys):
         case = Case(row["cohesive"], row["friction"], row["rolling"])
         serial = gilabert_sample(reproduction, case, row["seed"])
         assert (serial["phi"], serial["z"], serial["sim_time"]) == (row["phi"], row["z"], row["sim_time"])
+    # each sample measured under both conventions: 4- and 8-connected holes, periodic and windowed I(k)
+    assert {"hole_radius_w", "hole_radius_w8", "intensity_hann", "intensity_hann_0"} <= set(row)
     assert [c["quantities"]["phi"]["n"] for c in result["cases"]] == [2] * 8
     _print_reproduce(result)
     printed = capsys.readouterr().out
@@ -252,12 +259,17 @@ def test_folders_of_two_sizes_are_summarised_as_one_series(tmp_path):
     assert [(s["particles"], s["samples"]) for s in result["series"]] == [(1400, 8), (5600, 4)]
     for case in result["cases"]:
         assert case["completed"] == 6
-        for fit in case["averaged_fit"].values():
+        fits = case["averaged_fit"]
+        for fit in (fits["at_zero_pressure"], fits["under_pressure"]):
             assert fit["samples"] == 6 and fit["d_F"] == pytest.approx(1.6, abs=1e-3)
             assert fit["xi"] == pytest.approx(3.0, rel=1e-3)
+        # samples measured before the Hann window was: its fits say so, the rest stands
+        assert fits["under_pressure, Hann window"] == {"samples": 0, "d_F": None, "d_F_error": None, "xi": None,
+                                                       "xi_error": None, "k0": None, "error": "no sample's I(k)"}
     printed = granlab("reproduce", "gilabert-method2", "--series", str(small), str(large)).stdout
     assert f"{small} (8 samples of 1400 disks in all cases) + {large} (4 samples of 5600 disks" in printed
-    assert "d_F_0 <I(k)>  1.600" in printed
+    assert "d_F_0 <I(k)>        1.600" in printed
+    assert "k0_0 <I(k)>" in printed and "k0 <I(k)>" in printed
 
     other = _series_folder(tmp_path / "longer", 1400, 1, 42.0, max_time=1000.0)
     process = granlab("reproduce", "gilabert-method2", "--series", str(small), str(other))
@@ -304,8 +316,11 @@ def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     reproduction = Reproduction("gilabert-method2", particles=30, samples=2, max_time=40.0)
     serial = gilabert_sample(reproduction, Case(row["cohesive"], row["friction"], row["rolling"]), row["seed"])
     assert (serial["phi"], serial["z"], serial["sim_time"]) == (row["phi"], row["z"], row["sim_time"])
+    # each sample measured under both conventions: 4- and 8-connected holes, periodic and windowed I(k)
+    assert {"hole_radius_w", "hole_radius_w8", "intensity_hann", "intensity_hann_0"} <= set(row)
     for case in result["cases"]:
-        assert set(case["averaged_fit"]) == {"at_zero_pressure", "under_pressure"}
+        assert set(case["averaged_fit"]) == {"at_zero_pressure", "under_pressure", "at_zero_pressure, Hann window",
+                                             "under_pressure, Hann window"}
         assert all(fit["samples"] == 2 for fit in case["averaged_fit"].values())
 
     process = granlab("reproduce", "gilabert-method2", "--resume", str(folder), "--samples", "3")

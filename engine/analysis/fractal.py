@@ -152,6 +152,16 @@ class FractalAnalysis:
         return {k: v for k, v in self.__dict__.items() if k not in ("k", "intensity", "fitted", "reasons")}
 
 
+def small_scale_amplitude(phi: float, xi_over_a: float, d_F: float) -> float:
+    """``k0 = Phi (xi/a)^(2 - d_F)``: the solid fraction at the scale of one diameter that the
+    fractal law implies when it meets the mean density at xi (``Phi (r/xi)^(d_F - 2)`` at ``r = a``).
+    It separates the small scale from xi: at a fixed k0 a fitted d_F and xi trade against each other
+    (near d_F = 2 a small change of k0 moves xi by a factor). From the paper's Tables IV, V and VII:
+    1.03 and 1.16 with rolling resistance (P* = 0, 0.01: above 1, the law cannot hold down to one
+    diameter), 0.42 and 0.54 without."""
+    return phi * xi_over_a ** (2.0 - d_F)
+
+
 # ---------------------------------------------------------------------------------------- grid
 
 def grid_shape(box_lengths, spacing) -> tuple[int, int]:
@@ -196,19 +206,34 @@ def density_field(positions, radii, box_lengths, spacing) -> np.ndarray:
 
 # -------------------------------------------------------------------------- scattering function
 
-def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE) -> tuple[np.ndarray, np.ndarray]:
+TRANSFORMS = ("periodic", "hann")
+"""How :func:`structure_factor` transforms the field: as the periodic cell it is (the paper's cells are
+periodic), or as a window cut from a larger packing: ``chi - Phi`` times a 2D Hann window, its power
+scaled by the window's mean square (what one would do with a picture of a packing with edges)."""
+
+
+def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE,
+                     transform: str = "periodic") -> tuple[np.ndarray, np.ndarray]:
     """Binned ``|k|`` and ``I(k) = |chi_hat(k)|² / A`` (Eq. 25) of a periodic ``field`` (``(nx, ny)``
     over the box), ``k = 0`` left out: the mean ``|k|`` and the mean ``I`` of the wavevectors of
     each bin (shells ``2 pi / L`` wide, merged into ``bins_per_decade`` logarithmic bins where
-    those are wider)."""
+    those are wider). ``transform``: one of :data:`TRANSFORMS`."""
     field = np.asarray(field)
     lengths = _box(box_lengths)
     if field.ndim != 2 or min(field.shape) < 2:
         raise ParameterError("field", f"shape {field.shape}", "a 2D grid, at least 2 cells each way")
     whole("bins_per_decade", bins_per_decade, 1)
+    if transform not in TRANSFORMS:
+        raise ParameterError("transform", transform, " or ".join(TRANSFORMS))
     nx, ny = field.shape
     dx, dy = lengths[0] / nx, lengths[1] / ny
-    spectrum = scipy.fft.rfft2(field.astype(np.float32), workers=-1, overwrite_x=True)
+    values = field.astype(np.float32)
+    if transform == "hann":
+        wx, wy = (0.5 - 0.5 * np.cos(2.0 * math.pi * np.arange(n) / n) for n in (nx, ny))  # periodic Hann
+        values -= np.float32(values.mean(dtype=np.float64))
+        values *= (wx / math.sqrt(np.mean(wx ** 2))).astype(np.float32)[:, None]
+        values *= (wy / math.sqrt(np.mean(wy ** 2))).astype(np.float32)[None, :]
+    spectrum = scipy.fft.rfft2(values, workers=-1, overwrite_x=True)
     dk = 2.0 * math.pi / max(lengths)
     shells = int(math.hypot(math.pi / dx, math.pi / dy) / dk) + 2
     count, k_sum, power_sum = np.zeros(shells), np.zeros(shells), np.zeros(shells)
@@ -374,7 +399,21 @@ def fit_structure(k, intensity, phi: float, diameter: float | None = None, k_ran
 
 # ------------------------------------------------------------------------------------------ holes
 
-def _periodic_images(labels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _edge_pairs(labels, connectivity: int) -> list[tuple[np.ndarray, np.ndarray, tuple[int, int]]]:
+    """The cells that touch across the periodic edges: (cells at a high edge, the cells of the low
+    edge they touch, the box those sit one further on in); with ``connectivity`` 8, through corners too."""
+    last, first = labels[-1, :], labels[0, :]  # the x edge, along y
+    top, bottom = labels[:, -1], labels[:, 0]  # the y edge, along x
+    pairs = [(last, first, (1, 0)), (top, bottom, (0, 1))]
+    if connectivity == 8:
+        pairs += [(last[:-1], first[1:], (1, 0)), (last[-1:], first[:1], (1, 1)),
+                  (last[1:], first[:-1], (1, 0)), (last[:1], first[-1:], (1, -1)),
+                  (top[:-1], bottom[1:], (0, 1)), (top[-1:], bottom[:1], (1, 1)),
+                  (top[1:], bottom[:-1], (0, 1)), (top[:1], bottom[-1:], (-1, 1))]
+    return pairs
+
+
+def _periodic_images(labels, connectivity: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Join the labels that touch across the periodic edges (union-find that keeps the periodic
     image of each label relative to its root, as :func:`granlab.engine.analysis.packing.percolation_force`
     does for disks). Returns per label its root, its image ``(s_x, s_y)`` (its cells sit at
@@ -391,8 +430,7 @@ def _periodic_images(labels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             a = parent[a]
         return a, sx, sy
 
-    edges = ((labels[-1, :], labels[0, :], (1, 0)), (labels[:, -1], labels[:, 0], (0, 1)))
-    for high, low, (ex, ey) in edges:
+    for high, low, (ex, ey) in _edge_pairs(labels, connectivity):
         touching = (low > 0) & (high > 0)
         for a, b in np.unique(np.column_stack([high[touching], low[touching]]), axis=0):
             # the cells of b (low edge) continue those of a (high edge) one box further on
@@ -412,23 +450,26 @@ def _periodic_images(labels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return roots, images, wraps[roots]
 
 
-def hole_radii(field, spacing) -> tuple[np.ndarray, np.ndarray]:
+def hole_radii(field, spacing, connectivity: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """``(N_H, R_H)`` of every hole of a periodic ``field`` (``(nx, ny)``, cell ``spacing = (dx, dy)``):
-    the 4-connected regions of ``field == 0`` joined across the edges, ``R_H`` from Eq. 29 on the
-    unwrapped hole, ``inf`` for a hole that wraps around the box (it has no centre)."""
+    the 4-connected (or with ``connectivity`` 8, also through corners) regions of ``field == 0``
+    joined across the edges, ``R_H`` from Eq. 29 on the unwrapped hole, ``inf`` for a hole that
+    wraps around the box (it has no centre)."""
     field = np.asarray(field)
     if field.ndim != 2 or min(field.shape) < 2:
         raise ParameterError("field", f"shape {field.shape}", "a 2D grid, at least 2 cells each way")
+    if connectivity not in (4, 8):
+        raise ParameterError("connectivity", connectivity, "4 (cells sharing a side) or 8 (a side or a corner)")
     if np.ndim(spacing) == 0:
         spacing = (spacing, spacing)
     dx, dy = (_positive("spacing", s) for s in spacing)
     nx, ny = field.shape
-    labels, found = scipy.ndimage.label(field == 0)
+    labels, found = scipy.ndimage.label(field == 0, structure=np.ones((3, 3)) if connectivity == 8 else None)
     if found == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     count, sum_i, sum_j, sum_ii, sum_jj = (np.zeros(found + 1) for _ in range(5))
     label_moments(labels, count, sum_i, sum_j, sum_ii, sum_jj)
-    roots, images, wraps = _periodic_images(labels)
+    roots, images, wraps = _periodic_images(labels, connectivity)
     del labels
     ox, oy = images[:, 0] * nx, images[:, 1] * ny
     sum_i, sum_ii = sum_i + ox * count, sum_ii + 2.0 * ox * sum_i + ox ** 2 * count
@@ -449,7 +490,8 @@ def weighted_hole_radius(sizes, radii) -> float:
 
 # --------------------------------------------------------------------------------------- facade
 
-def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None, lap=None) -> FractalAnalysis:
+def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None, lap=None, connectivity: int = 4,
+                     transform: str = "periodic") -> FractalAnalysis:
     """The analysis of Gilabert Sec. V on the disks ``positions (N, 2)``, ``radii (N,)`` of the
     periodic box ``box_lengths`` (positions are wrapped into it).
 
@@ -458,8 +500,9 @@ def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None,
     raises :class:`ParameterError`. I(k) is fitted by Eq. 28 from the smallest ``k`` (``2 pi / L``)
     to ``FIT_K_MAX / a`` (:func:`fit_structure`, ``ell`` fitted); when the fit fails (no power-law
     range, or too few wavevectors in a small box) the fit's values are NaN and ``fit_error`` says
-    why, and I(k) and the holes are still returned. ``lap(stage)``, if given, is called at the end
-    of each stage (for timings).
+    why, and I(k) and the holes are still returned. ``connectivity`` (4 or 8) joins the holes' cells
+    (:func:`hole_radii`); ``transform`` is :func:`structure_factor`'s. ``lap(stage)``, if given, is
+    called at the end of each stage (for timings).
     """
     lap = lap or (lambda stage: None)
     positions, radii = _disks(positions, radii)
@@ -470,7 +513,7 @@ def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None,
     nx, ny = field.shape
     dx, dy = lengths[0] / nx, lengths[1] / ny
     phi = float(field.mean(dtype=np.float64))
-    k, intensity = structure_factor(field, lengths)
+    k, intensity = structure_factor(field, lengths, transform=transform)
     lap("structure factor")
     reasons = {}
     try:
@@ -481,7 +524,7 @@ def fractal_analysis(positions, radii, box_lengths, spacing=None, diameter=None,
         fit, fit_error = None, str(error)
         reasons["d_F"] = TOO_FEW_WAVEVECTORS if error.name == "k_range" else f"no fit of Eq. 28: {error}"
     lap("fit")
-    sizes, radius = hole_radii(field, (dx, dy))
+    sizes, radius = hole_radii(field, (dx, dy), connectivity)
     lap("holes")
     values = dict(d_F=math.nan, d_F_error=math.nan, xi=math.nan, xi_error=math.nan, constant=math.nan,
                   ell=math.nan, fitted=np.full(k.shape, math.nan), fit_range=(math.nan, math.nan))
