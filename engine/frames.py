@@ -35,7 +35,7 @@ class SceneFrame:
     sliding: np.ndarray        # (N,) bool: the disk has a sliding contact
     contacts: np.ndarray       # (M, 2, 2) float64 segments: centre of i -> centre of j (or wall point)
     contact_force: np.ndarray  # (M,) float64 magnitude of the contact force (>= 0)
-    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull), 2 sliding
+    contact_kind: np.ndarray   # (M,) int8: 0 compressive, 1 tensile (cohesive pull or dashpot), 2 sliding
     walls: np.ndarray          # (W, 2, 2) float64 wall segments (endpoints), may be (0, 2, 2)
     cell: tuple[float, float] | None  # periodic cell lengths (outline [0,Lx]x[0,Ly]) or None
     watched: np.ndarray        # (K, 2, 2) float64 segments of watched contacts, may be (0, 2, 2)

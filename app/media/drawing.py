@@ -41,7 +41,7 @@ SPOKE_COLOR = (25, 25, 25)
 WALL_COLOR = (60, 60, 60)
 CELL_COLOR = (68, 71, 71)
 MECHANISM_COLOR = (190, 115, 148)
-CONTACT_KINDS = (("compressive", COMPRESSIVE_COLOR), ("tensile (cohesion)", TENSILE_COLOR),
+CONTACT_KINDS = (("compressive", COMPRESSIVE_COLOR), ("tensile (cohesion or dashpot)", TENSILE_COLOR),
                  ("sliding", SLIDING_CONTACT_COLOR))
 """Name and colour of each contact kind of :attr:`granlab.engine.frames.SceneFrame.contact_kind` (0, 1, 2)."""
 
