@@ -17,8 +17,8 @@ import math
 
 import numpy as np
 import panel as pn
-from bokeh.models import (ColorBar, ColumnDataSource, CustomJSTickFormatter, LabelSet, LinearColorMapper, Range1d,
-                          Span)
+from bokeh.models import (BasicTicker, ColorBar, ColumnDataSource, CustomJSTickFormatter, LabelSet, LinearColorMapper,
+                          Range1d, Span)
 from bokeh.palettes import Blues256
 from bokeh.plotting import figure
 
@@ -367,8 +367,9 @@ class LoadStrainPlot(LivePlot):
         self.mapper = LinearColorMapper(palette=palette, low=0, high=1, low_color="#dddddd")
         fig.segment("x0", "y0", "x1", "y1", source=self.source, line_width=2,
                     color={"field": "cycle", "transform": self.mapper})
+        # whole cycles only: each cycle's colour spans cycle ± 0.5, and "cycle -0.4" would mean nothing
         fig.add_layout(ColorBar(color_mapper=self.mapper, title="cycle", width=10, title_text_font_size="11px",
-                                major_label_text_font_size="10px"), "right")
+                                major_label_text_font_size="10px", ticker=BasicTicker(min_interval=1)), "right")
         self.segments = Segments()
         self.cycle = 0
 
