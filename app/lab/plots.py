@@ -320,6 +320,8 @@ class StrainPlot(LivePlot):
         self.settle_item.label = {"value": fit_from.get("after") or "settling"}
         fig = self.figure
         first = min(self.reference, start)
+        # a legend before the first point would show its labels without their marks
+        fig.legend[0].visible = first in self.cycles
         if first not in self.cycles:
             for source in self.sources:
                 source.data = {"cycle": [], "strain": []}
