@@ -234,9 +234,10 @@ def _fractal(snapshot, prefix: str) -> dict:
     from .analysis.fractal import fractal_analysis
 
     values = {}
-    for tag, options in (("", {}), ("_hann", {"connectivity": 8, "transform": "hann"})):
+    for tag, connectivity, transform in (("", 4, "periodic"), ("_hann", 8, "hann")):
         try:
-            result = fractal_analysis(snapshot.positions, snapshot.radii, snapshot.box_lengths, **options)
+            result = fractal_analysis(snapshot.positions, snapshot.radii, snapshot.box_lengths,
+                                      connectivity=connectivity, transform=transform)
         except GranLabError as error:  # a grid that cannot be made leaves the other measurements standing
             values.update({f"d_F{tag}{prefix}": None, f"xi{tag}{prefix}": None,
                            f"fractal_error{tag}{prefix}": str(error)})
@@ -251,7 +252,7 @@ def _fractal(snapshot, prefix: str) -> dict:
         values.update({f"k{tag}{prefix}": result.k.tolist(), f"intensity{tag}{prefix}": result.intensity.tolist(),
                        f"grid_phi{tag}{prefix}": result.phi})
         if prefix == "":  # the holes do not depend on the fit
-            name = "hole_radius_w" + ("8" if options else "")
+            name = "hole_radius_w" if connectivity == 4 else "hole_radius_w8"
             values[name] = result.mean_hole_radius_w if math.isfinite(result.mean_hole_radius_w) else None
     return values
 

@@ -151,7 +151,7 @@ class VerdictRule:
 
     def describe(self, cycles: int, study_reference: int) -> str:
         """E.g. "cycles 30-100, RMS < |Δγ|" (the paper's rule on 100 cycles)."""
-        factor = {1.0: "", 0.5: "0.5 ", 2.0: "2 "}.get(self.threshold, f"{self.threshold:g} ")
+        factor = "" if self.threshold == 1.0 else f"{self.threshold:g} "
         text = f"cycles {self.reference_cycle(cycles, study_reference)}-{cycles}, RMS < {factor}|Δγ|"
         return text + ("" if self.jumps else ", a rattler's jumps out")
 
