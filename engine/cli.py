@@ -8,7 +8,7 @@
   (``--analysis PACKING.h5``: the wall time of every analysis instead);
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
-- ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N]
+- ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N] [--rolling {both,RR,noRR}]
   [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
   on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
@@ -36,7 +36,7 @@ from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed
 from .io.jsonsafe import jsonable
 from .params import TANGENTIAL, TANGENTIAL_MODELS
 from .protocols.prepare import CELL_MASS_READINGS
-from .reproduce import REPRODUCTIONS
+from .reproduce import REPRODUCTIONS, ROLLING_CASES
 
 
 def _float(text: str) -> float:
@@ -406,7 +406,8 @@ def _print_rules(rules: list[dict]) -> None:
 
 _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
                          "max_time": "--max-time", "rolling_damping_ratio": "--rolling-damping",
-                         "cell_mass_disks": "--cell-mass-disks", "cell_mass": "--cell-mass"}
+                         "cell_mass_disks": "--cell-mass-disks", "cell_mass": "--cell-mass",
+                         "rolling": "--rolling"}
 
 
 def _reproduce(args) -> dict:
@@ -724,6 +725,9 @@ def _add_reproduce(commands) -> None:
                            help="reading of M: 'mass', 3/10 of the grain mass (default: a mass, as Eq. 3 needs "
                                 "in 2D; reproduces Table III), or 'per-length', that over the cell size L (the "
                                 "paper's words; compacts faster, looser and less coordinated)")
+    reproduce.add_argument("--rolling", choices=tuple(ROLLING_CASES),
+                           help="run the cases with rolling resistance (RR), those without (noRR) or both "
+                                "(default both)")
     reproduce.add_argument("--seed", type=int, help="first seed (default 0)")
     folder = reproduce.add_mutually_exclusive_group()
     folder.add_argument("--out", metavar="DIR", help="write the settings and each sample to DIR as it finishes")

@@ -94,6 +94,8 @@ def test_each_case_gets_its_own_column():
         [1.030, 0.424, 1.160, 0.536], abs=1e-3)
     assert 0.05 < rr["k0_0"].error / rr["k0_0"].value < 0.15  # mostly d_F's error bar: ln 9.3 * 0.04
     assert len({(c.friction, c.rolling) for c in Reproduction("gilabert-method1").cases}) == len(METHOD1_COLUMNS)
+    assert [c.rolling for c in Reproduction("gilabert-method2", rolling="RR").cases] == [True]
+    assert {c.rolling for c in Reproduction("gilabert-method1", rolling="noRR").cases} == {False}
 
 
 def test_summary_gives_mean_and_standard_error():
@@ -163,6 +165,8 @@ def test_bad_input_is_refused_clearly():
         Reproduction("gilabert-method1", cell_mass_disks=0)
     with pytest.raises(ParameterError, match="cell_mass = 'per-area' is not allowed: one of mass, per-length"):
         Reproduction("gilabert-method1", cell_mass="per-area")
+    with pytest.raises(ParameterError, match="rolling = 'yes' is not allowed: one of both, RR, noRR"):
+        Reproduction("gilabert-method1", rolling="yes")
     process = granlab("reproduce", "gilabert-method1", "--cell-mass", "per-area")
     assert process.returncode == 2 and "invalid choice: 'per-area' (choose from 'mass', 'per-length')" in process.stderr
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
