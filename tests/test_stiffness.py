@@ -148,8 +148,9 @@ def test_null_space_count_matches_dense_linear_algebra():
 
 
 def test_the_sparse_solve_and_mechanisms_agree_with_the_dense_ones(monkeypatch):
-    """Packings above DENSE_SIZE velocity components go through SuperLU (diagonal pivots on a
-    symmetric ordering) and ARPACK: forced onto that path, the 16-disk box with 19 of its 37
+    """Packings above DENSE_SIZE velocity components (SOLVE_DENSE_SIZE for a solve) go through
+    SuperLU (diagonal pivots on a symmetric ordering) and ARPACK: forced onto that path, the
+    16-disk box with 19 of its 37
     contacts sliding (k not symmetric) gives the dense answers, and so does the enumeration of the
     2^5 states of five of its critical contacts."""
     from granlab.engine.analysis import status as ss
@@ -162,6 +163,7 @@ def test_the_sparse_solve_and_mechanisms_agree_with_the_dense_ones(monkeypatch):
     critical = ss.critical_contacts(net)[:5]
     states = ss.enumerate_states(net, load, critical)
     monkeypatch.setattr(st, "DENSE_SIZE", 0)
+    monkeypatch.setattr(st, "SOLVE_DENSE_SIZE", 0)
     np.testing.assert_allclose(st.response(net, load), dense_v, rtol=1e-8, atol=1e-12 * np.abs(dense_v).max())
     assert st.mechanisms(net, load).as_dict() == dense.as_dict()
     assert ss.enumerate_states(net, load, critical).as_dict() == states.as_dict()

@@ -168,12 +168,15 @@ def enumerate_states(net: Network, load_increment: np.ndarray, critical: np.ndar
     for offset in range(3):
         keep[3 * loose + offset] = False
     delta = 1e-10 * float(np.abs(np.diag(base)).max() or 1.0)
+    free = np.ones(net.dof, dtype=bool) if net.fixed is None else ~net.fixed
+    keep &= free
     scale = float(np.abs(np.diag(base)[keep]).max()) if keep.any() else 0.0
     images, consistent, unstable = set(), [], []
     for code in range(2 ** mc):
         bits = np.array([(code >> b) & 1 for b in range(mc)], dtype=bool)
         k = base + sum((changes[b] for b in np.flatnonzero(bits)), np.zeros_like(base))
-        v = np.linalg.solve(k + delta * np.eye(net.dof), load)
+        v = np.zeros(net.dof)
+        v[free] = np.linalg.solve((k + delta * np.eye(net.dof))[np.ix_(free, free)], load[free])
         vt = _v_tilde(net, (c.T @ v).reshape(-1, 3)[critical], critical)
         ok = np.where(bits, vt > 0.0, vt <= 0.0)
         images.add(tuple(ok))
@@ -194,6 +197,8 @@ def _enumerate_sparse(net: Network, load: np.ndarray, critical: np.ndarray, tole
     keep = np.ones(net.dof, dtype=bool)
     for offset in range(3):
         keep[3 * loose + offset] = False
+    if net.fixed is not None:
+        keep &= ~net.fixed
     index = np.flatnonzero(keep)
     images, consistent, unstable = set(), [], []
     for code in range(2 ** mc):
