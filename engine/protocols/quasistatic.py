@@ -64,6 +64,8 @@ MAX_ITERATIONS = 40
 NEAR = 0.1
 """Pairs closer than this fraction of the smallest radius are candidate contacts: they touch, and
 carry force, once their overlap is positive (twice the largest move of a step)."""
+MAX_STEPS = 100_000
+"""The most load steps :func:`follow` takes (hours at 400 disks)."""
 MAX_UNIQUE = 10
 """Critical contacts up to which ``check_unique`` enumerates every state (above 1500 velocity
 components, :data:`granlab.engine.analysis.status.MAX_ENUMERATED_SPARSE`)."""
@@ -346,8 +348,8 @@ class _Stepper:
         k = stiffness.stiffness_matrix(net, sliding).tocsr()[free][:, free]
         du = np.zeros(net.dof)
         du[free] = stiffness.regularised_solve(k, rhs[free])
-        norm = float(np.linalg.norm(rhs[free]))
-        miss = float(np.linalg.norm(k @ du[free] - rhs[free])) / norm if norm > 0 else 0.0
+        norm = float(np.abs(rhs[free]).max(initial=0.0))
+        miss = float(np.abs(k @ du[free] - rhs[free]).max(initial=0.0)) / norm if norm > 0 else 0.0
         return du, miss
 
     def step(self, lam0: float, lam1: float):
@@ -437,15 +439,19 @@ class _Stepper:
         p.add_near()
 
     def changes_within(self, lam0: float, lam1: float) -> list[str]:
-        """The contacts that open or close on the way from ``lam0`` to ``lam1`` (the linear step):
-        "contact 3–7 opens"."""
+        """The contacts that open or close on the way from ``lam0`` to ``lam1`` (the linear step,
+        unless it moves more than :data:`MAX_MOVE`): "contact 3–7 opens" (at most four named)."""
         p = self.p
         net0, residual0 = self.begin(lam0)
         du, _ = self.solve(net0, p.external(lam1) - p.external(lam0) + residual0, net0.sliding)
+        if np.abs(du).max() > MAX_MOVE * float(p.radii.min()):  # the packing gives way: a collapse
+            return []
         x, _, offsets = self.moved(du)
         _, overlap, _, _ = p.geometry(x, offsets, p.i, p.j)
-        return [f"contact {self.name(p.i[a], p.j[a])} {'closes' if overlap[a] > 0.0 else 'opens'}"
-                for a in np.flatnonzero((overlap > 0.0) != (net0.kn > 0.0))]
+        changed = np.flatnonzero((overlap > 0.0) != (net0.kn > 0.0))
+        names = [f"contact {self.name(p.i[a], p.j[a])} {'closes' if overlap[a] > 0.0 else 'opens'}"
+                 for a in changed[:4]]
+        return names + ([f"{len(changed) - 4} more"] if len(changed) > 4 else [])
 
     def name(self, a, b) -> str:
         p = self.p
@@ -457,8 +463,9 @@ def follow(sim: Simulation, targets: Targets, steps: int = 100, tolerance: float
     """Follow the load from its present value to ``targets`` in ``steps`` equal steps of λ (halved
     where a step does not converge). ``sim`` must hold a packing in equilibrium; it is not changed."""
     start = time.perf_counter()
-    if int(steps) != steps or steps < 1:
-        raise ParameterError("steps", steps, "a whole number >= 1")
+    if int(steps) != steps or not 1 <= steps <= MAX_STEPS:
+        raise ParameterError("steps", steps, f"a whole number from 1 to {MAX_STEPS} (a 400-disk box takes about "
+                                             f"0.1 s a step)")
     packing = _Packing(sim, targets)
     stepper = _Stepper(packing, tolerance, check_unique)
     rows = {key: [] for key in ("load", "wall_offsets", "positions", "angles", "sliding", "critical", "flips",
