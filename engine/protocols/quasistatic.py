@@ -163,7 +163,7 @@ class _Packing:
                 raise ParameterError("disk", index, f"0 <= index < {self.n}")
             self.target_forces[int(index)] += np.asarray(value, dtype=float) - sim.particles.external_force[int(index)]
         p = sim.particles
-        fixed = np.zeros(stiffness_dof(self), dtype=bool)
+        fixed = np.zeros(self.dof, dtype=bool)
         kinematic = np.isin(p.kind, (KIND_FIXED, KIND_KINEMATIC))
         fixed[0: 3 * self.n: 3] = (p.inv_mass == 0) | kinematic
         fixed[1: 3 * self.n: 3] = (p.inv_mass == 0) | kinematic
@@ -201,20 +201,26 @@ class _Packing:
         self.i, self.j, self.ft, self.slid = i[keep], j[keep], ft[keep], slid[keep]
 
     # ------------------------------------------------------------------ loads
-    def wall_load(self, lam: float) -> np.ndarray:
+    @property
+    def dof(self) -> int:
+        return 3 * self.n + int(self.mobile.sum())
+
+    def wall_load(self, lam: float, offsets) -> np.ndarray:
+        """The walls' loads at ``lam``: a load per length times the box length it spans at ``offsets``."""
         sigma = self.start_loads + lam * (self.target_loads - self.start_loads)
         out = sigma.copy()
         for m, (a, b) in enumerate(self.length_ref):
             if a >= 0:
-                out[m] = sigma[m] * -(self.offsets[a] + self.offsets[b])
+                out[m] = sigma[m] * -(offsets[a] + offsets[b])
         return out
 
-    def external(self, lam: float) -> np.ndarray:
-        out = np.zeros(stiffness_dof(self))
+    def external(self, lam: float, offsets=None) -> np.ndarray:
+        """The load on every velocity component at ``lam``, the walls at ``offsets`` (default: the present)."""
+        out = np.zeros(self.dof)
         forces = self.start_forces + lam * (self.target_forces - self.start_forces)
         out[0: 3 * self.n: 3] = forces[:, 0]
         out[1: 3 * self.n: 3] = forces[:, 1]
-        out[3 * self.n:] = self.wall_load(lam)[self.mobile]
+        out[3 * self.n:] = self.wall_load(lam, self.offsets if offsets is None else offsets)[self.mobile]
         return out
 
     def rattlers(self, net: stiffness.Network) -> np.ndarray:
@@ -264,12 +270,8 @@ class _Packing:
         branch = np.zeros((len(i), 2))
         return stiffness.Network(x, self.radii, i, np.where(is_wall, -1, j), np.where(is_wall, j - self.n, -1),
                                  normal, alpha, kn, kt, np.zeros(len(i)), status, ne, ft, float(self.law.friction),
-                                 self.wall_normals, wall_dof, self.external(lam), branch, np.zeros(2),
+                                 self.wall_normals, wall_dof, self.external(lam, offsets), branch, np.zeros(2),
                                  np.full(2, -1), ~self.free)
-
-
-def stiffness_dof(packing: _Packing) -> int:
-    return 3 * packing.n + int(packing.mobile.sum())
 
 
 class _Stepper:
@@ -286,7 +288,7 @@ class _Stepper:
         p = self.p
         self.x0, self.angles0, self.offsets0 = p.x.copy(), p.angles.copy(), p.offsets.copy()
         self._start = None
-        net, _, residual = self.forces(np.zeros(stiffness_dof(p)), p.i, p.j, p.ft, lam)
+        net, _, residual = self.forces(np.zeros(p.dof), p.i, p.j, p.ft, lam)
         # the contacts that slid in the last step start minimum sliding as sliding: one flip per change
         still = p.slid & (np.abs(net.tangential) >= p.law.friction * net.elastic_normal) & (net.elastic_normal > 0)
         status = np.where(still, np.where(net.tangential > 0, STATUS_SLIDE_POS, STATUS_SLIDE_NEG), net.status)
@@ -305,24 +307,17 @@ class _Stepper:
         """The contacts' forces and statuses at ``du`` from the step's start, with the residual."""
         p = self.p
         x, _, offsets = self.moved(du)
-        p_offsets = p.offsets
-        p.offsets = offsets  # a per-length load spans the present box
-        try:
-            normal, overlap, _, is_wall = p.geometry(x, offsets, i, j)
-            ne = p.elastic_normal(overlap, i, j, is_wall)
-            status = np.full(len(i), STATUS_STICK)
-            net = p.network(x, offsets, i, j, ne, ft0, status, lam)
-            rel = stiffness.relative_velocities(self.start_network(i, j, ft0, lam), du) if len(i) else np.zeros((0, 3))
-            ft = ft0 - net.kt * rel[:, 1]
-            limit = p.law.friction * ne
-            status = np.where(ft > limit, STATUS_SLIDE_POS, np.where(ft < -limit, STATUS_SLIDE_NEG, STATUS_STICK))
-            ft = np.clip(ft, -limit, limit)
-            net = p.network(x, offsets, i, j, ne, ft, status, lam)
-            c = stiffness.compatibility(net, (stiffness.NORMAL, stiffness.TANGENTIAL))
-            contact = np.column_stack([ne, ft]).ravel()
-            residual = net.external + c @ contact
-        finally:
-            p.offsets = p_offsets
+        _, overlap, _, is_wall = p.geometry(x, offsets, i, j)
+        ne = p.elastic_normal(overlap, i, j, is_wall)
+        net = p.network(x, offsets, i, j, ne, ft0, np.full(len(i), STATUS_STICK), lam)
+        rel = stiffness.relative_velocities(self.start_network(i, j, ft0, lam), du) if len(i) else np.zeros((0, 3))
+        ft = ft0 - net.kt * rel[:, 1]
+        limit = p.law.friction * ne
+        status = np.where(ft > limit, STATUS_SLIDE_POS, np.where(ft < -limit, STATUS_SLIDE_NEG, STATUS_STICK))
+        ft = np.clip(ft, -limit, limit)
+        net = p.network(x, offsets, i, j, ne, ft, status, lam)
+        c = stiffness.compatibility(net, (stiffness.NORMAL, stiffness.TANGENTIAL))
+        residual = net.external + c @ np.column_stack([ne, ft]).ravel()
         return net, overlap, residual
 
     def start_network(self, i, j, ft0, lam):
