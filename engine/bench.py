@@ -241,3 +241,80 @@ def analysis(path: str | Path, particles: int = ANALYSIS_PARTICLES, repeats: int
     return {"packing": str(path), "particles": state.disks, "contacts": int(state.contacts.count),
             "preparation_s": preparation, "timings_s": timings, "values": values,
             "stiffness_mechanisms_status_s": total("stiffness", "status"), "fractal_s": total("fractal")}
+
+
+LAB_CHUNK_SECONDS = 0.02
+"""The work the lab's engine thread does between two looks at its commands (it takes the GIL then)."""
+
+
+def analysis_beside_engine(path: str | Path, particles: int = ANALYSIS_PARTICLES, engine_seconds: float = 3.0,
+                           repeats: int = 3) -> dict:
+    """The lab's case: a simulation of the packing in ``path`` steps on its own thread (one numba
+    thread, as the lab's engine) while each analysis runs on the calling thread, first with every
+    core (BLAS, FFT, numba) and then with the cores the engine leaves free
+    (:data:`granlab.app.lab.analysis.ANALYSIS_THREADS`'s rule). Reports the engine's rate alone and
+    during each analysis, and each analysis's time alone and beside the engine: medians of
+    ``repeats`` runs, the two thread counts alternated. The engine's rate is counted at the end of
+    its chunks of work (:data:`LAB_CHUNK_SECONDS`): an analysis shorter than five chunks has none."""
+    import os
+    import threading
+
+    from .analysis import ANALYSES
+    from .analysis.report import analyze
+    from .analysis.states import read_state
+    from .io.h5md import resume
+
+    preparation = prepared_packing(path, particles)
+    state = read_state(path)
+    sim = resume(path)[0]
+    free = max(1, (os.cpu_count() or 1) - 1)
+    counter = {"steps": 0}
+    stop, go = threading.Event(), threading.Event()
+
+    def engine() -> None:
+        numba.set_num_threads(1)
+        start = time.perf_counter()
+        sim.run(100)
+        chunk = max(1, int(LAB_CHUNK_SECONDS * 100 / (time.perf_counter() - start)))
+        while not stop.is_set():
+            go.wait()
+            if stop.is_set():
+                return
+            sim.run(chunk)
+            counter["steps"] += chunk
+
+    def engine_rate(seconds: float) -> float:
+        start, steps = time.perf_counter(), counter["steps"]
+        time.sleep(seconds)
+        return (counter["steps"] - steps) / (time.perf_counter() - start)
+
+    for kind in ANALYSES:  # compile or load every kernel first
+        analyze(state, kind)
+    alone = {kind: float(np.median([analyze(state, kind).timings["total"] for _ in range(repeats)]))
+             for kind in ANALYSES}
+    thread = threading.Thread(target=engine, daemon=True)
+    thread.start()
+    go.set()
+    rate_alone = engine_rate(engine_seconds)
+    rows = {}
+    for kind in ANALYSES:
+        runs = {"every_core": [], "free_cores": []}
+        for _ in range(repeats):
+            for name, threads in (("every_core", None), ("free_cores", free)):
+                start, steps = time.perf_counter(), counter["steps"]
+                report = analyze(state, kind, threads=threads)
+                elapsed = time.perf_counter() - start
+                share = (counter["steps"] - steps) / elapsed / rate_alone if elapsed >= 5 * LAB_CHUNK_SECONDS else None
+                runs[name].append((report.timings["total"], share))
+        row = {"alone_s": alone[kind]}
+        for name, pairs in runs.items():
+            row[f"{name}_s"] = float(np.median([t for t, _ in pairs]))
+            shares = [share for _, share in pairs if share is not None]
+            row[f"{name}_engine_share"] = float(np.median(shares)) if shares else None
+        rows[kind] = row
+    stop.set()
+    go.set()
+    thread.join()
+    return {"packing": str(path), "particles": state.disks, "contacts": int(state.contacts.count),
+            "preparation_s": preparation, "cores": os.cpu_count(), "free_threads": free,
+            "engine_steps_per_s_alone": rate_alone, "beside_engine": rows}

@@ -214,7 +214,11 @@ def _print_one_experiment(result: dict) -> None:
 def _bench(args) -> dict:
     from . import bench
 
+    if args.beside_engine and not args.analysis:
+        raise GranLabError("--beside-engine times the analyses of --analysis PACKING.h5: give that too")
     if args.analysis:
+        if args.beside_engine:
+            return bench.analysis_beside_engine(args.analysis, args.particles or bench.ANALYSIS_PARTICLES)
         return bench.analysis(args.analysis, args.particles or bench.ANALYSIS_PARTICLES)
     steps = args.steps or (bench.SCALING_STEPS if args.scaling else bench.TIMED_STEPS)
     if steps < 1 or not 2 <= args.side <= 1000:
@@ -252,6 +256,17 @@ def _print_bench(result: dict) -> None:
                   f"{row['ns_per_particle_step']:>17.1f} {row['bytes_per_disk']:>11.0f} {row['rebuild_in_steps']:>20.1f} "
                   f"{row['rebuilds']:>9} {100 * row['rebuild_share']:>13.1f}%")
         print(f"  slowest size over fastest, per particle-step: {result['worst_over_best']:.2f}")
+        return
+    if "beside_engine" in result:
+        print(f"analyses of {result['packing']} ({result['particles']} disks) beside a simulation of it on one "
+              f"thread ({result['engine_steps_per_s_alone']:.0f} steps/s alone; {result['cores']} cores, "
+              f"{result['free_threads']} free)")
+        print(f"  {'analysis':<10}{'alone':>9}{'beside, every core':>26}{'beside, free cores':>26}")
+        for kind, row in result["beside_engine"].items():
+            print(f"  {kind:<10}{row['alone_s']:>8.3f}s"
+                  + "".join(f"{row[name + '_s']:>12.3f}s, engine "
+                          + ("    -" if row[name + "_engine_share"] is None else f"{row[name + '_engine_share']:>5.2f}")
+                          for name in ("every_core", "free_cores")))
         return
     if "fractal_s" in result:
         print(f"analysis of {result['packing']}: {result['particles']} disks, {result['contacts']} contacts"
@@ -646,6 +661,9 @@ def _add_bench(commands) -> None:
     bench.add_argument("--analysis", metavar="PACKING.h5",
                        help="time every analysis of 'granlab analyze' on this packing instead (prepared there by "
                             "method 1 if missing)")
+    bench.add_argument("--beside-engine", action="store_true",
+                       help="with --analysis: run each analysis beside a simulation of the packing on one thread, "
+                            "with every core and with the cores it leaves free, as in the lab")
     bench.add_argument("--particles", type=_positive_int, help="disks of a prepared packing or of the lab (default 5600)")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench, printer=_print_bench)

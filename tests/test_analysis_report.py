@@ -9,6 +9,7 @@ import math
 import re
 
 import numpy as np
+import pytest
 
 from granlab.engine import cli
 from granlab.engine.analysis import ANALYSES
@@ -18,6 +19,7 @@ from granlab.engine.analysis import status as ss
 from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.report import MISSING, AnalysisReport, analyze
 from granlab.engine.analysis.states import PackingState, read_state
+from granlab.engine.errors import ParameterError
 from granlab.engine.generate import radii as make_radii, random_gas
 from granlab.engine.io.h5md import RunWriter
 from granlab.engine.params import ContactLaw
@@ -228,3 +230,23 @@ def test_granlab_analyze_prints_the_rows_and_its_json_keeps_nan(tmp_path, capsys
     assert result["d_F"] == "nan" and result["fit_range"] == ["nan", "nan"]
     assert set(result) == {"analysis", "timings_s", "run_file", "source", "particles", "forces_known", "law", "warnings",
                            *report.values}
+
+
+def test_an_analysis_runs_on_the_threads_it_is_given_and_gives_the_same_values():
+    """The lab gives an analysis the cores its engine leaves free: numba's kernels, the FFT and BLAS
+    run on that many threads during it, and on as many as before after it; the values do not change."""
+    import numba
+    import scipy.fft
+    from threadpoolctl import threadpool_info
+
+    state = PackingState.from_snapshot(method1_packing().snapshot())
+    before = numba.get_num_threads(), scipy.fft.get_workers()
+    with rp.analysis_threads(1):
+        assert (numba.get_num_threads(), scipy.fft.get_workers()) == (1, 1)
+        assert all(pool["num_threads"] == 1 for pool in threadpool_info() if pool["user_api"] == "blas")
+    assert (numba.get_num_threads(), scipy.fft.get_workers()) == before
+    for kind in ("rigidity", "fractal"):
+        one, every = analyze(state, kind, threads=1).values, analyze(state, kind).values
+        assert json.dumps(one, default=str) == json.dumps(every, default=str)
+    with pytest.raises(ParameterError, match="threads = 0 is not allowed"):
+        analyze(state, "packing", threads=0)

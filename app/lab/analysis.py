@@ -9,6 +9,7 @@ The functions below turn a result into what the plots and the 3D scene draw.
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -22,6 +23,8 @@ from granlab.engine.analysis.states import PackingState
 from granlab.engine.errors import GranLabError
 
 SQRT3 = float(np.sqrt(3.0))
+ANALYSIS_THREADS = max(1, (os.cpu_count() or 1) - 1)
+"""Threads of an analysis (numba, FFT, BLAS): the cores the engine's one thread leaves free."""
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,7 @@ class AnalysisRunner:
     def _run(self, state, kind: str) -> None:
         try:
             state = state() if callable(state) else state
-            report, error = analyze(state, kind), ""
+            report, error = analyze(state, kind, threads=ANALYSIS_THREADS), ""
         except (GranLabError, ValueError, MemoryError) as failure:
             state = state if isinstance(state, PackingState) else None
             report, error = None, str(failure)

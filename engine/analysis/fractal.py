@@ -233,7 +233,7 @@ def structure_factor(field, box_lengths, bins_per_decade: int = BINS_PER_DECADE,
         values -= np.float32(values.mean(dtype=np.float64))
         values *= (wx / math.sqrt(np.mean(wx ** 2))).astype(np.float32)[:, None]
         values *= (wy / math.sqrt(np.mean(wy ** 2))).astype(np.float32)[None, :]
-    spectrum = scipy.fft.rfft2(values, workers=-1, overwrite_x=True)
+    spectrum = scipy.fft.rfft2(values, overwrite_x=True)  # workers: scipy.fft.set_workers (analysis_threads)
     dk = 2.0 * math.pi / max(lengths)
     shells = int(math.hypot(math.pi / dx, math.pi / dy) / dk) + 2
     count, k_sum, power_sum = np.zeros(shells), np.zeros(shells), np.zeros(shells)
