@@ -78,7 +78,7 @@ def main() -> None:
             ax.loglog(k, free.model(k), "-", color=colour, linewidth=1,
                       label=f"Eq. 28 fitted: d_F {free.d_F:.2f}, ξ {free.xi:.1f} a")
             ax.loglog(k, structure_model(k, phi, d_F, xi, ell, constant), "--", color=colour, linewidth=1,
-                      label=f"Eq. 28, paper's d_F {d_F}, ξ {xi} a")
+                      label=f"Eq. 28, paper's d_F {d_F}, ξ {xi} a, amplitude fitted")
         ax.axvline(1.0 / xi, color="grey", linestyle=":", linewidth=1, label="k = 1/ξ of the paper")
         ax.set(xlabel="k (1/a)", title=f"with RR, {stage}", xlim=(0.08, 8.0))
         ax.set_xticks([0.1, 0.2, 0.5, 1, 2, 5], ["0.1", "0.2", "0.5", "1", "2", "5"])
