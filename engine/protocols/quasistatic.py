@@ -309,9 +309,9 @@ class _Stepper:
         x, _, offsets = self.moved(du)
         _, overlap, _, is_wall = p.geometry(x, offsets, i, j)
         ne = p.elastic_normal(overlap, i, j, is_wall)
-        net = p.network(x, offsets, i, j, ne, ft0, np.full(len(i), STATUS_STICK), lam)
+        kt = np.where((overlap > 0.0) & (p.law.friction > 0.0), p.law.tangential_stiffness, 0.0)
         rel = stiffness.relative_velocities(self.start_network(i, j, ft0, lam), du) if len(i) else np.zeros((0, 3))
-        ft = ft0 - net.kt * rel[:, 1]
+        ft = ft0 - kt * rel[:, 1]
         limit = p.law.friction * ne
         status = np.where(ft > limit, STATUS_SLIDE_POS, np.where(ft < -limit, STATUS_SLIDE_NEG, STATUS_STICK))
         ft = np.clip(ft, -limit, limit)
