@@ -157,7 +157,8 @@ def _best_seconds(call, repeats: int) -> float:
 
 def profile(side: int = 100, steps: int = 1000) -> dict:
     """Where a particle-step of the reference system goes, on one thread: the whole step (``steps``
-    steps in one call), the contact pass alone (per row of the contact table) and the pass over
+    steps in one call), the contact pass alone (per row of the contact table; also with every row
+    computed directly, not over gathered blocks) and the pass over
     the disks alone (per disk, gathering the force buffers, two kicks and a drift of zero length,
     so the state does not change), the rest (walls, cell, tallies, checks) by difference, and one
     rebuild of the contact table (in steps)."""
@@ -175,6 +176,9 @@ def profile(side: int = 100, steps: int = 1000) -> dict:
         run = sim.run_options(sim.dt, 1)
         contact_pass = _best_seconds(lambda: contacts.contact_forces(p, w, cell, ct, ws, sim._law_vector, run, False),
                                      repeats)
+        direct = run._replace(gathered=False)
+        direct_pass = _best_seconds(
+            lambda: contacts.contact_forces(p, w, cell, ct, ws, sim._law_vector, direct, False), repeats)
         particle_pass = _best_seconds(lambda: integrate.particle_pass(
             p, ws.force_buffer, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
             ws.partial_gather, ws.gather), repeats)
@@ -186,6 +190,7 @@ def profile(side: int = 100, steps: int = 1000) -> dict:
     return {"system": f"lammps_reference.in: {n} disks, Cundall-Strack, dt=0.001, 1 thread", "particles": n,
             "rows": rows, "rows_per_disk": rows / n, "ns_per_particle_step": step * ns,
             "contact_pass_ns_per_disk": contact_pass * ns, "contact_pass_ns_per_row": contact_pass * 1e9 / rows,
+            "direct_contact_pass_ns_per_row": direct_pass * 1e9 / rows,
             "particle_pass_ns_per_disk": particle_pass * ns,
             "other_ns_per_disk": (step - contact_pass - particle_pass) * ns,
             "rebuild_in_steps": one_rebuild / step}

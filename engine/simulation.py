@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from .errors import DivergenceError, ParameterError
-from .kernels import integrate as k_integrate
+from .kernels import gathered as k_gathered, integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
                              ROLLING_ELASTIC, TANGENTIAL_ELASTIC, WALL_KINETIC, elastic_normal_forces, energy_terms,
                              rolling_distance)
@@ -269,6 +269,11 @@ class Simulation:
     be replaced by :meth:`restore_state`).
     """
 
+    gathered = True
+    """Whether the contact loop gathers its common rows into contiguous blocks
+    (:mod:`granlab.engine.kernels.gathered`): the same results bit for bit, faster; ``False`` runs
+    every row directly (the reference the tests and the bench compare with)."""
+
     def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
                  cell: PeriodicCell | None = None, gravity=(0.0, 0.0), check_initial_overlap: bool = True):
@@ -307,7 +312,8 @@ class Simulation:
             lagged_virial=np.zeros((2, 2)), lagged_kinetic=np.zeros(2),
             gather=np.zeros(k_integrate.GATHER_SIZE), partial_gather=np.zeros((threads, k_integrate.GATHER_SIZE)),
             flags=flags,
-            energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE))
+            energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE),
+            row_columns=np.zeros((threads, k_gathered.COLUMNS * k_gathered.BLOCK)))
         self._advance(0.0, 1)
         if check_initial_overlap:
             self._check_initial_overlap()
@@ -420,7 +426,7 @@ class Simulation:
         """What the kernels take for ``n_steps`` steps of ``dt`` from the current state."""
         return RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
                           self._time_origin, self.step - self._step_origin, n_steps, self.skin,
-                          self.integration.max_overlap, self.threads())
+                          self.integration.max_overlap, self.threads(), self.gathered)
 
     def _advance(self, dt: float, n_steps: int) -> tuple[int, int]:
         """One call of the kernel driver, growing the contact table until it fits."""

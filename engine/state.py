@@ -54,16 +54,18 @@ ContactArrays = namedtuple(
 
 RunOptions = namedtuple(
     "RunOptions",
-    "normal_model tangential_model gravity has_loads dt time_origin step_offset n_steps skin max_overlap n_chunks",
+    "normal_model tangential_model gravity has_loads dt time_origin step_offset n_steps skin max_overlap n_chunks "
+    "gathered",
 )
 """What one call of the step driver needs besides the state: the law's model codes, gravity (2,),
 whether disks carry applied loads, the step, the clock (``time_origin``, ``step_offset``), the
-number of steps, the Verlet skin, the overlap that counts as a divergence and the thread chunks."""
+number of steps, the Verlet skin, the overlap that counts as a divergence, the thread chunks and whether the
+contact loop gathers its common rows (:mod:`granlab.engine.kernels.gathered`)."""
 
 Workspace = namedtuple(
     "Workspace",
     "force_buffer wall_buffer tally_buffer virial_correction lagged_virial lagged_kinetic wrapped wraps reference "
-    "wall_reference length_reference scale gather partial_gather flags energy info",
+    "wall_reference length_reference scale gather partial_gather flags energy info row_columns",
 )
 
 

@@ -19,6 +19,12 @@ along its normal), ``n = r/|r|``, ``t = z × n``:
   and ``+K_r dtheta`` on j with ``d dtheta/dt = w_i - w_j`` (Gilabert Eq. 10).
 
 On sliding, both anchors move by half the slip, so the rolling distance of Eq. 20 is kept.
+
+Rows are taken in blocks of :data:`granlab.engine.kernels.gathered.BLOCK`: where the models allow
+it (a linear normal spring, a tangential model whose laws vectorise), the rows of a block that
+touched at the step before and still overlap are computed together over gathered columns
+(:mod:`granlab.engine.kernels.gathered`) and only committed here, in row order; every other row
+is computed by the loop itself.
 """
 
 import math
@@ -28,9 +34,12 @@ from numba import literal_unroll, literally, njit, prange, uint64
 
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_STICK
 from . import tangential
+from .gathered import (BLOCK, C_FN, C_FT, C_FX, C_FY, C_GAP, C_HOT, C_NORMAL_DAMPING, C_OVERLAP_EXCESS, C_ROLL,
+                       C_ROLLING_SLIP, C_ROLLING_WORK, C_SLIDING, C_SLIP, C_SPRING, C_STATUS, C_TANGENTIAL_WORK,
+                       C_TORQUE_I, C_TORQUE_J, compute_block, gather_block)
 from .jit import KERNEL, PARALLEL
-from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force, normal_elastic, rolling,
-                   touching)
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, NORMAL_LINEAR, ZETA, ZETA_R, cohesion_force, dashpot_share,
+                   normal_elastic, opened_dashpot_share, rolling_step, touching)
 from .tangential import CODES as TANGENTIAL_CODES, RowGeometry
 
 # per-chunk scalar tallies
@@ -80,46 +89,10 @@ def predicted_relative_motion(predicted, i, j, is_wall, wall_vx, wall_vy, affine
 
 
 @njit(**KERNEL)
-def rolling_step(kr, mu_r, gamma_r_factor, inv_reduced, ne, previous, relative_spin, relative_spin_d, dt):
-    """The rolling spring of a contact over one step (Gilabert Eq. 10): its relative rotation
-    advanced by the half-step spins, its dashpot on the whole-step ones. Returns the spring, the
-    moment on disk i, the work of the dashpot and the energy the slip lets go."""
-    gamma_r = 0.0
-    if gamma_r_factor > 0.0 and inv_reduced > 0.0:
-        gamma_r = gamma_r_factor / math.sqrt(inv_reduced)
-    roll, moment, slip = rolling(kr, mu_r, gamma_r, ne, previous + relative_spin * dt, relative_spin_d)
-    viscous_work = -(moment + kr * roll) * relative_spin_d * dt if slip == 0.0 else 0.0
-    return roll, moment, viscous_work, 0.5 * kr * (previous + roll) * slip
-
-
-@njit(**KERNEL)
-def dashpot_share(overlap, vn, dt, fresh):
-    """The share of the step's window ``[t - dt/2, t + dt/2]`` the contact spends touching,
-    estimated from its overlap and normal velocity, by which its normal dashpot is multiplied.
-
-    Velocity Verlet applies the force of step t over that window. The spring's force vanishes
-    where a contact begins and ends, the dashpot's does not: applied over whole windows, it
-    starts and stops up to dt/2 early or late, a first-order error. A fresh contact began
-    ``overlap / -V_n`` ago, and what of that lies in the window before (which had no force) is
-    added here; a separating one opens in ``overlap / V_n``, and only what lies in this window
-    counts (the rest is :func:`opened_dashpot_share`'s, at the next step).
-    """
-    share = 1.0
-    # V_n's sign flips at random in a packing at rest: each test below is one predictable branch
-    if fresh and overlap < -min(vn, 0.0) * dt:
-        share = overlap / (-vn * dt) + 0.5
-    if overlap < 0.5 * max(vn, 0.0) * dt:
-        share += overlap / (vn * dt) - 0.5
-    return share
-
-
-@njit(**KERNEL)
-def opened_dashpot_share(gap, vn, dt):
-    """For a contact that opened since the step before: the share of this step's window before
-    it opened, ``gap / V_n`` ago (see :func:`dashpot_share`)."""
-    if vn > 0.0 and gap < 0.5 * vn * dt:
-        return 0.5 - gap / (vn * dt)
-    return 0.0
+def image_virial(fx, fy, sx, sy, vxx, vxy, vyx, vyy):
+    """The virial corrections with the force ``(fx, fy)`` of a row through the periodic image shifted
+    by ``(sx, sy)`` subtracted."""
+    return vxx - fx * sx, vxy - fx * sy, vyx - fy * sx, vyy - fy * sy
 
 
 @njit(**KERNEL)
@@ -210,6 +183,7 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     length_y = cell.length[1]
     strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
     strain_y = cell.rate[1] / length_y if length_y > 0.0 else 0.0
+    cell_strain = (strain_x, strain_y)
     particle_i = ct.particle_i
     particle_j = ct.particle_j
     image = ct.image
@@ -231,9 +205,54 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     vxx = vxy = vyx = vyy = 0.0  # virial corrections
     overlapping = 0
     max_overlap = 0.0
+    columns = ws.row_columns
+    gathered = run.gathered and normal_model == NORMAL_LINEAR and tangential.gathered(tangential_model)
     for k in range(lo, hi):
+        q = (k - lo) % BLOCK
+        if gathered and q == 0:
+            end = min(hi, k + BLOCK)
+            gather_block(p, cell.length, cell_strain, ct, columns, c, k, end, laws.kr > 0.0)
+            compute_block(columns, c, end - k, laws, tangential_model, dt, overlap_limit, whole_step)
         i = uint64(particle_i[k])
         j = uint64(particle_j[k])
+        if gathered and columns[c, C_HOT * BLOCK + q] != 0.0:
+            excess = columns[c, C_OVERLAP_EXCESS * BLOCK + q]
+            if excess != 0.0:
+                overlapping += 1
+                max_overlap = max(max_overlap, excess)
+            damping += columns[c, C_NORMAL_DAMPING * BLOCK + q]
+            if tangential.whole_step_dashpots(tangential_model):
+                damping += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
+            else:
+                sliding += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
+            state = int(columns[c, C_STATUS * BLOCK + q])
+            if state != STATUS_STICK:
+                slip = columns[c, C_SLIP * BLOCK + q]
+                sliding += columns[c, C_SLIDING * BLOCK + q]
+                ct.anchor_angle_i[k] += 0.5 * slip / radius[i]
+                ct.anchor_angle_j[k] += 0.5 * slip / radius[j]
+            ct.tangential_spring[k] = columns[c, C_SPRING * BLOCK + q]
+            status[k] = state
+            if laws.kr > 0.0:
+                damping += columns[c, C_ROLLING_WORK * BLOCK + q]
+                rolling_loss += columns[c, C_ROLLING_SLIP * BLOCK + q]
+                ct.rolling_spring[k] = columns[c, C_ROLL * BLOCK + q]
+            fx = columns[c, C_FX * BLOCK + q]
+            fy = columns[c, C_FY * BLOCK + q]
+            if store:
+                ct.normal_force[k] = columns[c, C_FN * BLOCK + q]
+                ct.tangential_force[k] = columns[c, C_FT * BLOCK + q]
+                surface_gap[k] = columns[c, C_GAP * BLOCK + q]
+            force_buffer[c, i, 0] += fx
+            force_buffer[c, i, 1] += fy
+            force_buffer[c, i, 2] += columns[c, C_TORQUE_I * BLOCK + q]
+            force_buffer[c, j, 0] -= fx
+            force_buffer[c, j, 1] -= fy
+            force_buffer[c, j, 2] += columns[c, C_TORQUE_J * BLOCK + q]
+            if image[k, 0] != 0 or image[k, 1] != 0:
+                vxx, vxy, vyx, vyy = image_virial(fx, fy, image[k, 0] * length_x, image[k, 1] * length_y, vxx, vxy,
+                                                  vyx, vyy)
+            continue
         ri = radius[i]
         is_wall = j >= n
         wall_vx = 0.0
@@ -309,8 +328,6 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
             if overlap > overlap_limit * limit_radius:
                 overlapping += 1
                 max_overlap = max(max_overlap, overlap / limit_radius)
-            # the laws of a touching row stay in the loop: moved into a function, the compiler fuses other
-            # multiply-adds (contract) and runs with cohesion no longer match earlier ones bit for bit
             kt = laws.kt
             ne = normal_elastic(normal_model, laws.kn, overlap, ri, rj, is_wall)
             fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
@@ -382,12 +399,8 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
             force_buffer[c, j, 1] -= fy
             force_buffer[c, j, 2] += -rj * ft - moment
             if image[k, 0] != 0 or image[k, 1] != 0:
-                sx = image[k, 0] * length_x
-                sy = image[k, 1] * length_y
-                vxx -= fx * sx
-                vxy -= fx * sy
-                vyx -= fy * sx
-                vyy -= fy * sy
+                vxx, vxy, vyx, vyy = image_virial(fx, fy, image[k, 0] * length_x, image[k, 1] * length_y, vxx, vxy,
+                                                  vyx, vyy)
     tally_buffer[c, TALLY_DAMPING] = damping
     tally_buffer[c, TALLY_SLIDING] = sliding
     tally_buffer[c, TALLY_ROLLING] = rolling_loss

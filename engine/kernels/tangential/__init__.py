@@ -37,6 +37,7 @@ disk i and how far the wall has slid along itself."""
 
 MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for model in TANGENTIAL.values()}
 _WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGENTIAL.values()}
+_GATHERED = {model.code: model.gathered for model in TANGENTIAL.values()}
 CODES = tuple(sorted(MODELS))
 """The codes the contact loop is compiled for, one loop each."""
 
@@ -70,6 +71,11 @@ def centre_factor(model, alpha):
 def whole_step_dashpots(model):
     """Whether the dashpots take the velocities predicted at the whole step."""
     return _WHOLE_STEP_DASHPOTS[model]
+
+
+def gathered(model):
+    """Whether the contact loop computes the model's common rows over gathered blocks."""
+    return _GATHERED[model]
 
 
 @overload(spring_rate, prefer_literal=True)
@@ -108,4 +114,11 @@ def _centre_factor(model, alpha):
 def _whole_step_dashpots(model):
     if isinstance(model, types.IntegerLiteral):
         flag = _WHOLE_STEP_DASHPOTS[model.literal_value]
+        return lambda model: flag
+
+
+@overload(gathered, prefer_literal=True)
+def _gathered(model):
+    if isinstance(model, types.IntegerLiteral):
+        flag = _GATHERED[model.literal_value]
         return lambda model: flag
