@@ -453,33 +453,33 @@ def cycle_rows(lab: Lab, cycle: int) -> np.ndarray:
 def test_ratchet_box_is_flattened_by_its_first_cycle():
     lab = run("ratchet")
     readout = lab.seen["ratchet-first-cycle"]["readout"]
-    assert cycle_times(lab)[0] == pytest.approx(26.0, abs=2.0)
+    assert cycle_times(lab)[0] == pytest.approx(20.0, abs=2.0)
     assert readout["phi"] == pytest.approx(0.84, abs=0.005) and readout["z"] == pytest.approx(4.05, abs=0.03)
-    assert cycle_rows(lab, 0)[:, 3].min() == pytest.approx(-3.2e-3, rel=0.03)
-    assert dict(lab.preset._cycle_gamma)[1] == pytest.approx(-6.9e-4, rel=0.03)
+    assert cycle_rows(lab, 0)[:, 3].min() == pytest.approx(-3.3e-3, rel=0.03)
+    assert dict(lab.preset._cycle_gamma)[1] == pytest.approx(-7.2e-4, rel=0.03)
 
 
 @check("ratchet-sliding-follows-load")
 def test_ratchet_sliding_grows_with_the_load_and_stops_when_it_turns():
     seen = run("ratchet").seen["ratchet-sliding-follows-load"]
     phase, count = seen["counts"].T
-    assert count[phase < 0.5].max() == pytest.approx(50, abs=8)
+    assert count[phase < 0.5].max() == pytest.approx(45, abs=8)
     assert count[(phase > 0.51) & (phase < 0.6)].max() <= 2  # within a hundredth of a cycle of the top
-    assert count[(phase > 0.9) & (phase < 1.0)].max() == pytest.approx(33, abs=6)
+    assert count[(phase > 0.9) & (phase < 1.0)].max() == pytest.approx(25, abs=6)
     assert count[(phase > 0.005) & (phase < 0.05)].max() <= 2
-    assert seen["touched"] == pytest.approx(580, abs=10)
-    assert seen["slid"] == pytest.approx(80, abs=8) and 6 <= seen["touched"] / seen["slid"] <= 8
+    assert seen["touched"] == pytest.approx(575, abs=10)
+    assert seen["slid"] == pytest.approx(65, abs=8) and 8 <= seen["touched"] / seen["slid"] <= 10
 
 
 @check("ratchet-energy")
-def test_ratchet_cycle_stores_nothing_and_dissipates_6e_5():
+def test_ratchet_cycle_stores_nothing_and_dissipates_8e_5():
     lab = run("ratchet")
     stored = [cycle_rows(lab, c)[0, 5] for c in (1, 2, 3)]
-    assert stored == pytest.approx([0.0103] * 3, abs=5e-5)
+    assert stored == pytest.approx([0.0098] * 3, abs=5e-5)
     dissipated = [cycle_rows(lab, c)[:, 6] for c in (0, 1, 2)]
     gains = [d[-1] - d[0] for d in dissipated]
-    assert gains[0] == pytest.approx(1.6e-4, rel=0.05)
-    assert gains[2] == pytest.approx(6.4e-5, rel=0.05)
+    assert gains[0] == pytest.approx(1.8e-4, rel=0.05)
+    assert gains[2] == pytest.approx(7.8e-5, rel=0.05)
     assert np.abs(np.diff(stored)).max() < 0.1 * gains[2]
 
 
@@ -488,9 +488,9 @@ def test_ratchet_increments_shrink_while_the_packing_settles():
     lab = run("ratchet")
     gamma = [g for _, g in lab.preset._cycle_gamma]
     steps = np.diff(gamma)[1:]
-    assert steps * 1e6 == pytest.approx([-4.4, -1.5, -0.6], abs=0.1)
+    assert steps * 1e6 == pytest.approx([-9.6, -3.0, -1.1], abs=0.1)
     fit = lab.seen["ratchet-settling"]["fit"]
-    assert fit["dgamma"] == pytest.approx(-1e-6, rel=0.1)
+    assert fit["dgamma"] == pytest.approx(-2.1e-6, rel=0.1)
 
 
 # --------------------------------------------------------------------------------- closed path
