@@ -27,8 +27,9 @@ class TangentialModel:
     it the residue a / (r_i + r_j) of ratcheting Eq. 17 (``path_dependent``); and whether its
     dashpots take the velocities predicted at the whole step, the energy balance's error then
     falling faster than dt (``whole_step_dashpots``), or the half-step ones, as dt (LAMMPS's
-    integration); and whether the contact loop computes its common rows over gathered blocks
-    (``gathered``: its laws must vectorise, without calls to atan2 and the like)."""
+    integration); and whether its spring reads the direction of the contact, ``atan2(n_y, n_x)``
+    (``reads_direction``: the contact loop computes it for such a model only, outside the loop
+    that vectorises)."""
 
     name: str
     code: int
@@ -37,7 +38,7 @@ class TangentialModel:
     alpha_factor: bool
     path_dependent: bool
     whole_step_dashpots: bool = True
-    gathered: bool = True
+    reads_direction: bool = False
 
     @property
     def key(self) -> str:
@@ -49,7 +50,7 @@ TANGENTIAL = {model.name: model for model in (
     TangentialModel("cundall-strack", 0, "Cundall–Strack (ratcheting Eqs. 7–11)", "Cundall–Strack", False, True),
     TangentialModel("alpha", 1, "α-corrected integration (ratcheting Eqs. 23–25, 30)", "α-corrected", True, False),
     TangentialModel("angle", 2, "angle-based spring (ratcheting Eqs. 18–22)", "angle-based", True, False,
-                    gathered=False),
+                    reads_direction=True),
     TangentialModel("lammps", 3, "LAMMPS gran/hooke/history (shear vector; Coulomb on the total normal force)",
                     "LAMMPS hooke/history", False, True, whole_step_dashpots=False))}
 """The one registry of tangential models, by name; every other list of them is made from it. The

@@ -21,7 +21,7 @@ along its normal), ``n = r/|r|``, ``t = z × n``:
 On sliding, both anchors move by half the slip, so the rolling distance of Eq. 20 is kept.
 
 Rows are taken in blocks of :data:`granlab.engine.kernels.gathered.BLOCK`: where the models allow
-it (a linear normal spring, a tangential model whose laws vectorise), the rows of a block that
+it (a linear normal spring), the rows of a block that
 touched at the step before and still overlap are computed together over gathered columns
 (:mod:`granlab.engine.kernels.gathered`) and only committed here, in row order; every other row
 is computed by the loop itself.
@@ -206,12 +206,13 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     overlapping = 0
     max_overlap = 0.0
     columns = ws.row_columns
-    gathered = run.gathered and normal_model == NORMAL_LINEAR and tangential.gathered(tangential_model)
+    gathered = run.gathered and normal_model == NORMAL_LINEAR
     for k in range(lo, hi):
         q = (k - lo) % BLOCK
         if gathered and q == 0:
             end = min(hi, k + BLOCK)
-            gather_block(p, cell.length, cell_strain, ct, columns, c, k, end, laws.kr > 0.0)
+            gather_block(p, cell.length, cell_strain, ct, columns, c, k, end, laws.kr > 0.0,
+                         tangential.reads_direction(tangential_model))
             compute_block(columns, c, end - k, laws, tangential_model, dt, overlap_limit, whole_step)
         i = uint64(particle_i[k])
         j = uint64(particle_j[k])
@@ -336,8 +337,9 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
             damping += share * eta * vn_d * vn_d * dt
             if fresh:
                 anchor(ct, k, angle, i, j, nx, ny, is_wall, position[i, 0], position[i, 1], wall_shift)
+            phi = math.atan2(ny, nx) if tangential.reads_direction(tangential_model) else 0.0
             row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, ct.anchor_angle_i[k],
-                              ct.anchor_angle_j[k], is_wall, position[i, 0], position[i, 1], wall_shift)
+                              ct.anchor_angle_j[k], is_wall, position[i, 0], position[i, 1], wall_shift, phi)
             rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
             previous = 0.0 if fresh else ct.tangential_spring[k]
             trial = tangential.trial_spring(tangential_model, previous, rate, dt, fresh, row)

@@ -8,7 +8,8 @@ branches, which the compiler vectorises (eight rows at once, packed square roots
 the contact loop (:func:`granlab.engine.kernels.contacts.contact_chunk`) commits the history,
 tallies and forces of those rows in row order, and computes every other row (walls, fresh and
 opening contacts, distant pairs, cohesion at a distance) itself. It is used with a linear normal
-spring and the tangential models whose laws vectorise (the registry's ``gathered``).
+spring (the area law calls atan2 and sin, which do not vectorise); for the angle spring, the gather
+computes the direction of each contact (atan2) and the angles, the rest vectorises.
 
 The arithmetic of a row is the contact loop's, operation for operation, without fused
 multiply-adds (:data:`granlab.engine.kernels.jit.KERNEL`), and the loop accumulates forces and
@@ -31,18 +32,21 @@ two columns (a constant) and vectorises without checking at run time that they d
 
 # gathered columns
 (C_RX, C_RY, C_DVX, C_DVY, C_SPIN, C_RELATIVE_SPIN, C_RI, C_RJ, C_PREDICTED_X, C_PREDICTED_Y, C_PREDICTED_SPIN,
- C_PREDICTED_RELATIVE_SPIN, C_INV_INERTIA, C_ROOT_REDUCED_MASS, C_PREVIOUS, C_PREVIOUS_ROLL, C_TOUCHED,
+ C_PREDICTED_RELATIVE_SPIN, C_INV_INERTIA, C_ROOT_REDUCED_MASS, C_PREVIOUS, C_PREVIOUS_ROLL, C_TOUCHED, C_PHI,
+ C_ANGLE_I, C_ANGLE_J, C_ANCHOR_I, C_ANCHOR_J,
  # computed columns
  C_HOT, C_FX, C_FY, C_TORQUE_I, C_TORQUE_J, C_FN, C_FT, C_GAP, C_SPRING, C_STATUS, C_SLIP, C_NORMAL_DAMPING,
- C_TANGENTIAL_WORK, C_SLIDING, C_ROLL, C_ROLLING_WORK, C_ROLLING_SLIP, C_OVERLAP_EXCESS) = range(35)
-COLUMNS = 35
+ C_TANGENTIAL_WORK, C_SLIDING, C_ROLL, C_ROLLING_WORK, C_ROLLING_SLIP, C_OVERLAP_EXCESS) = range(40)
+COLUMNS = 40
 
 
 @njit(**KERNEL)
-def gather_block(p, cell_length, strain, ct, columns, c, b0, b1, rolling):
+def gather_block(p, cell_length, strain, ct, columns, c, b0, b1, rolling, direction):
     """Chunk ``c``'s gathered columns get the data of rows ``[b0, b1)``, row ``b0 + q`` at ``q`` (the
-    rolling spring's only with ``rolling``). ``C_TOUCHED`` is 1 for a pair of disks that touched at the
-    step before; the other columns of a wall's row are disk i's with itself, not read."""
+    rolling spring's only with ``rolling``; with ``direction``, the direction of the contact, computed
+    here as the contact loop computes it, and the angles and anchors). ``C_TOUCHED`` is 1 for a pair of
+    disks that touched at the step before; the other columns of a wall's row are disk i's with itself,
+    not read."""
     position, velocity, omega, radius, predicted = p.position, p.velocity, p.omega, p.radius, p.predicted_motion
     n = uint64(position.shape[0])
     for k in range(uint64(b0), uint64(b1)):
@@ -80,6 +84,13 @@ def gather_block(p, cell_length, strain, ct, columns, c, b0, b1, rolling):
         if rolling:
             columns[c, C_INV_INERTIA * BLOCK + q] = p.inv_inertia[i] + p.inv_inertia[j]
             columns[c, C_PREVIOUS_ROLL * BLOCK + q] = ct.rolling_spring[k]
+        if direction:
+            inv_dist = 1.0 / math.sqrt(rx * rx + ry * ry)
+            columns[c, C_PHI * BLOCK + q] = math.atan2(ry * inv_dist, rx * inv_dist)
+            columns[c, C_ANGLE_I * BLOCK + q] = p.angle[i]
+            columns[c, C_ANGLE_J * BLOCK + q] = p.angle[j]
+            columns[c, C_ANCHOR_I * BLOCK + q] = ct.anchor_angle_i[k]
+            columns[c, C_ANCHOR_J * BLOCK + q] = ct.anchor_angle_j[k]
 
 
 @njit(**KERNEL)
@@ -123,8 +134,9 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
         ne = normal_elastic(NORMAL_LINEAR, laws.kn, overlap, ri, rj, False)
         share = dashpot_share(overlap, vn_d, dt, False) if whole_step else 1.0
         fn = ne - share * eta * vn_d + cohesion_force(laws.f0, laws.d0, gap)
-        # no gathered model reads the angles and anchors
-        row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0, 0.0)
+        row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, columns[c, C_ANGLE_I * BLOCK + q],
+                          columns[c, C_ANGLE_J * BLOCK + q], columns[c, C_ANCHOR_I * BLOCK + q],
+                          columns[c, C_ANCHOR_J * BLOCK + q], False, 0.0, 0.0, 0.0, columns[c, C_PHI * BLOCK + q])
         rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
         previous = columns[c, C_PREVIOUS * BLOCK + q]
         trial = tangential.trial_spring(tangential_model, previous, rate, dt, False, row)

@@ -29,15 +29,16 @@ from numba.extending import overload
 from ...params import TANGENTIAL
 
 RowGeometry = namedtuple("RowGeometry", "nx ny rx ry dvx dvy ri rj angle_i angle_j anchor_i anchor_j is_wall xi yi "
-                                        "wall_shift")
+                                        "wall_shift phi")
 """What a model may read of a touching row: normal ``n``, branch vector ``r`` (for a wall, from the
 wall to the centre), relative velocity ``V`` of the centres, radii (``rj = 0`` for a wall), body
 angles and anchors (for a wall, ``anchor_j`` is along the wall and ``angle_j = 0``), the centre of
-disk i and how far the wall has slid along itself."""
+disk i, how far the wall has slid along itself, and the direction of ``n``, ``phi = atan2(n_y, n_x)``
+(0 unless the model :func:`reads_direction`)."""
 
 MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for model in TANGENTIAL.values()}
 _WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGENTIAL.values()}
-_GATHERED = {model.code: model.gathered for model in TANGENTIAL.values()}
+_READS_DIRECTION = {model.code: model.reads_direction for model in TANGENTIAL.values()}
 CODES = tuple(sorted(MODELS))
 """The codes the contact loop is compiled for, one loop each."""
 
@@ -73,9 +74,9 @@ def whole_step_dashpots(model):
     return _WHOLE_STEP_DASHPOTS[model]
 
 
-def gathered(model):
-    """Whether the contact loop computes the model's common rows over gathered blocks."""
-    return _GATHERED[model]
+def reads_direction(model):
+    """Whether the model's spring reads ``RowGeometry.phi``."""
+    return _READS_DIRECTION[model]
 
 
 @overload(spring_rate, prefer_literal=True)
@@ -117,8 +118,8 @@ def _whole_step_dashpots(model):
         return lambda model: flag
 
 
-@overload(gathered, prefer_literal=True)
-def _gathered(model):
+@overload(reads_direction, prefer_literal=True)
+def _reads_direction(model):
     if isinstance(model, types.IntegerLiteral):
-        flag = _GATHERED[model.literal_value]
+        flag = _READS_DIRECTION[model.literal_value]
         return lambda model: flag

@@ -19,7 +19,7 @@ __all__ = ["spring_rate", "trial_spring", "limit", "centre_factor"]
 def trial_spring(previous, rate, dt, fresh, row):
     """``r_i wrap(phi + pi - theta_i - a_i) + r_j wrap(phi - theta_j - a_j)`` (Eqs. 19, 21–22); for a
     wall, the distance along it from the anchor replaces the second arc."""
-    phi = math.atan2(row.ny, row.nx)
+    phi = row.phi
     arc = disk_arc(row.ri, phi + math.pi, row.angle_i, row.anchor_i)
     if row.is_wall:
         return arc + wall_arc(-row.ny, row.nx, row.xi, row.yi, row.wall_shift, row.anchor_j)
