@@ -426,7 +426,7 @@ class Simulation:
         """What the kernels take for ``n_steps`` steps of ``dt`` from the current state."""
         return RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
                           self._time_origin, self.step - self._step_origin, n_steps, self.skin,
-                          self.integration.max_overlap, self.threads(), self.gathered)
+                          self.integration.max_overlap, self.threads(), bool(self.gathered))
 
     def _advance(self, dt: float, n_steps: int) -> tuple[int, int]:
         """One call of the kernel driver, growing the contact table until it fits."""
