@@ -20,11 +20,10 @@ along its normal), ``n = r/|r|``, ``t = z × n``:
 
 On sliding, both anchors move by half the slip, so the rolling distance of Eq. 20 is kept.
 
-Rows are taken in blocks of :data:`granlab.engine.kernels.gathered.BLOCK`: where the models allow
-it (a linear normal spring), the rows of a block that
-touched at the step before and still overlap are computed together over gathered columns
-(:mod:`granlab.engine.kernels.gathered`) and only committed here, in row order; every other row
-is computed by the loop itself.
+Rows are taken in blocks of :data:`granlab.engine.kernels.gathered.BLOCK`: with a linear normal
+spring, the rows of a block that touched at the step before and still overlap are computed
+together over gathered columns (:mod:`granlab.engine.kernels.gathered`) and only committed here,
+in row order; every other row is computed by the loop itself.
 """
 
 import math
