@@ -191,6 +191,25 @@ def test_a_triangle_of_disks_is_isostatic_and_a_double_triangle_has_h_1():
     assert r.balanced
 
 
+def test_h_comes_from_rank_nullity_where_superlu_runs_out_of_memory_on_g_gt(monkeypatch):
+    """SuperLU ran out of memory factorising GGᵀ of a 5600-disk packing: H is then M − rank G and the
+    balance is not claimed."""
+    from granlab.engine.analysis import rigidity as module
+
+    def null_space(matrix, tolerance, vectors):
+        if matrix.shape[0] == 10:  # GGᵀ of the double triangle: M × M
+            raise MemoryError("Not enough memory to perform factorization.")
+        return measured(matrix, tolerance, vectors=vectors)
+
+    measured = module.null_space
+    monkeypatch.setattr(module, "null_space", null_space)
+    d = 2.0 - 1e-6
+    double = [(0.0, 0.0), (d, 0.0), (d / 2, d * math.sqrt(3) / 2), (3 * d / 2, d * math.sqrt(3) / 2)]
+    r = rigidity(glued(double, [1.0] * 4, ContactLaw(friction=0.5)))
+    assert (r.degrees_of_freedom, r.constraints, r.floppy_modes, r.hyperstaticity) == (12, 10, 3, 1)
+    assert r.balanced is None and r.as_dict()["balanced"] is None
+
+
 def test_frictionless_cohesive_aggregates_have_4_minus_z_n_over_2_floppy_modes():
     """A loop-free aggregate (each disk glued to one earlier disk) is not hyperstatic, so by
     Gilabert Eq. 22 its floppy modes number 2N - N_c = (4 - z) N / 2."""

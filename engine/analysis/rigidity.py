@@ -35,20 +35,26 @@ class Rigidity:
     """Counts of Gilabert App. A for the rigidity matrix G (M × N_f): ``degrees_of_freedom`` N_f,
     ``constraints`` M (relative motions that carry forces), ``floppy_modes`` K = dim null G,
     ``hyperstaticity`` H = dim null Gᵀ (self-stress states), ``rank``; N_f + H = M + K holds when the
-    two null spaces were measured consistently (``balanced``)."""
+    two null spaces were measured consistently (``balanced``; None when H was not measured but
+    taken from rank–nullity, ``hyperstaticity_measured`` False)."""
 
     degrees_of_freedom: int
     constraints: int
     floppy_modes: int
     hyperstaticity: int
     rank: int
+    hyperstaticity_measured: bool = True
 
     @property
-    def balanced(self) -> bool:
+    def balanced(self) -> bool | None:
+        if not self.hyperstaticity_measured:
+            return None
         return self.degrees_of_freedom + self.hyperstaticity == self.constraints + self.floppy_modes
 
     def as_dict(self) -> dict:
-        return dict(self.__dict__, balanced=self.balanced)
+        return {"degrees_of_freedom": self.degrees_of_freedom, "constraints": self.constraints,
+                "floppy_modes": self.floppy_modes, "hyperstaticity": self.hyperstaticity, "rank": self.rank,
+                "balanced": self.balanced}
 
 
 def rigidity_matrix(net: Network) -> sp.csr_matrix:
@@ -69,11 +75,16 @@ def rigidity_matrix(net: Network) -> sp.csr_matrix:
 
 
 def rigidity(net: Network, tolerance: float = ZERO_TOLERANCE) -> Rigidity:
-    """K from the null space of GᵀG and H from that of GGᵀ, each by its own factorisation."""
+    """K from the null space of GᵀG and H from that of GGᵀ, each by its own factorisation. Where
+    SuperLU runs out of memory on GGᵀ (its fill on some packings of 5600 disks), H is taken from
+    rank–nullity, M − rank G, and the balance is not checked."""
     g = rigidity_matrix(net)
     m, nf = g.shape
     floppy, _ = null_space((g.T @ g).tocsc(), tolerance, vectors=False)
-    stress, _ = null_space((g @ g.T).tocsc(), tolerance, vectors=False)
+    try:
+        stress, _ = null_space((g @ g.T).tocsc(), tolerance, vectors=False)
+    except MemoryError:
+        return Rigidity(nf, m, floppy, m - (nf - floppy), nf - floppy, hyperstaticity_measured=False)
     return Rigidity(nf, m, floppy, stress, nf - floppy)
 
 
@@ -90,4 +101,7 @@ def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
               "stiffness_positive_definite": None if internal is None else bool(internal == 0 and mech.unstable == 0),
               "forces_known": state.forces_known}
     reasons = {} if internal is not None else {"stiffness_positive_definite": unclassified(MODE_VECTORS)}
+    if not counts.hyperstaticity_measured:
+        reasons["balanced"] = ("not checked: H is M − rank G (rank–nullity), the factorisation of GGᵀ having run out "
+                               "of SuperLU's memory")
     return AnalysisReport("rigidity", values, counts, reasons=reasons)
