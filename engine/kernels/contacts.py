@@ -37,8 +37,9 @@ from .gathered import (BLOCK, C_FN, C_FT, C_FX, C_FY, C_GAP, C_HOT, C_NORMAL_DAM
                        C_ROLLING_SLIP, C_ROLLING_WORK, C_SLIDING, C_SLIP, C_SPRING, C_STATUS, C_TANGENTIAL_WORK,
                        C_TORQUE_I, C_TORQUE_J, compute_block, gather_block)
 from .jit import KERNEL, PARALLEL
-from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, NORMAL_LINEAR, ZETA, ZETA_R, cohesion_force, dashpot_share,
-                   normal_elastic, opened_dashpot_share, rolling_step, touching)
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, NORMAL_LINEAR, ZETA, ZETA_R, cohesion_force,
+                   opened_dashpot_share, touching)
+from .pair import touching_laws
 from .tangential import CODES as TANGENTIAL_CODES, RowGeometry
 
 # per-chunk scalar tallies
@@ -320,60 +321,49 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
             spin_d = spin_sum
             relative_spin_d = relative_spin
         eta = laws.eta_factor * ct.root_reduced_mass[k]
-        ft = 0.0
-        moment = 0.0
         if gap < 0.0:
             overlap = -gap
             limit_radius = ri if is_wall else min(ri, rj)
             if overlap > overlap_limit * limit_radius:
                 overlapping += 1
                 max_overlap = max(max_overlap, overlap / limit_radius)
-            kt = laws.kt
-            ne = normal_elastic(normal_model, laws.kn, overlap, ri, rj, is_wall)
             fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
-            share = dashpot_share(overlap, vn_d, dt, fresh) if whole_step else 1.0
-            fn = ne - share * eta * vn_d + cohesion_force(laws.f0, d0, gap)
-            damping += share * eta * vn_d * vn_d * dt
             if fresh:
                 anchor(ct, k, angle, i, j, nx, ny, is_wall, position[i, 0], position[i, 1], wall_shift)
             phi = math.atan2(ny, nx) if tangential.reads_direction(tangential_model) else 0.0
             row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, ct.anchor_angle_i[k],
                               ct.anchor_angle_j[k], is_wall, position[i, 0], position[i, 1], wall_shift, phi)
-            rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
-            previous = 0.0 if fresh else ct.tangential_spring[k]
-            trial = tangential.trial_spring(tangential_model, previous, rate, dt, fresh, row)
-            rate_d = tangential.spring_rate(tangential_model, vt_d, spin_d, alpha)
-            spring, ft, state, slip = tangential.limit(tangential_model, kt, laws.mu, laws.gamma_t, ne, fn, trial,
-                                                       rate_d)
-            # the viscous part of F_t, F_t + K_t D_t, does work (zero while a GranLab spring slides)
-            viscous_work = -(ft + kt * spring) * rate_d * dt
+            rolling = laws.kr > 0.0
+            inv_reduced = p.inv_inertia[i] + (0.0 if is_wall else p.inv_inertia[j]) if rolling else 0.0
+            (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, slip_energy, rolling_work,
+             rolling_slip) = touching_laws(normal_model, tangential_model, laws, dt, whole_step, overlap, ri, rj,
+                                           is_wall, eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, fresh,
+                                           0.0 if fresh else ct.tangential_spring[k], row, rolling, inv_reduced,
+                                           0.0 if fresh or not rolling else ct.rolling_spring[k], relative_spin,
+                                           relative_spin_d)
+            damping += normal_damping
             if tangential.whole_step_dashpots(tangential_model):
-                damping += viscous_work
+                damping += tangential_work
             else:
                 # LAMMPS's model (the only one with half-step dashpots) limits the dashpot's force with the
                 # spring's and rescales the two together, which can load the spring as it slides, and a
                 # contact can chatter between sticking and sliding: split, either tally could go negative;
                 # as one, only by what the rescale itself creates
-                sliding += viscous_work
+                sliding += tangential_work
             if state != STATUS_STICK:
-                # the elastic force of the step before and of this one, averaged as velocity
-                # Verlet averages them in the kinetic energy: first-order errors cancel
-                sliding += 0.5 * kt * (previous + spring) * slip
+                sliding += slip_energy
                 ct.anchor_angle_i[k] += 0.5 * slip / ri
                 ct.anchor_angle_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
             ct.tangential_spring[k] = spring
             status[k] = state
-            if laws.kr > 0.0:
-                previous_roll = 0.0 if fresh else ct.rolling_spring[k]
-                inv_reduced = p.inv_inertia[i] + (0.0 if is_wall else p.inv_inertia[j])
-                roll, moment, viscous_work, slip_loss = rolling_step(laws.kr, laws.mu_r, laws.gamma_r_factor,
-                                                                     inv_reduced, ne, previous_roll, relative_spin,
-                                                                     relative_spin_d, dt)
-                damping += viscous_work
-                rolling_loss += slip_loss
+            if rolling:
+                damping += rolling_work
+                rolling_loss += rolling_slip
                 ct.rolling_spring[k] = roll
         else:
             fn, damping, opening = separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening)
+            ft = 0.0
+            moment = 0.0
             if fn == 0.0 and status[k] != STATUS_COHESIVE:
                 if store:
                     surface_gap[k] = gap

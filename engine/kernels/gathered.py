@@ -11,9 +11,10 @@ opening contacts, distant pairs, cohesion at a distance) itself. It is used with
 spring (the area law calls atan2 and sin, which do not vectorise); for the angle spring, the gather
 computes the direction of each contact (atan2) and the angles, the rest vectorises.
 
-The arithmetic of a row is the contact loop's, operation for operation, without fused
-multiply-adds (:data:`granlab.engine.kernels.jit.KERNEL`), and the loop accumulates forces and
-tallies in the same order: the results are the same bit for bit (tests/test_gathered.py).
+The laws of a row are the contact loop's own function (:func:`granlab.engine.kernels.pair.touching_laws`,
+inlined in both), without fused multiply-adds (:data:`granlab.engine.kernels.jit.KERNEL`), and the
+loop accumulates forces and tallies in the same order: the results are the same bit for bit
+(tests/test_gathered.py).
 """
 
 import math
@@ -22,7 +23,8 @@ from numba import njit, uint64
 
 from . import tangential
 from .jit import KERNEL
-from .laws import NORMAL_LINEAR, cohesion_force, dashpot_share, normal_elastic, rolling_step, touching
+from .laws import NORMAL_LINEAR, touching
+from .pair import touching_laws
 from .tangential import RowGeometry
 
 BLOCK = 128
@@ -100,8 +102,6 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
     still overlaps (a disk pair), and only there are the other computed columns the row's. Every
     quantity is computed for every row, the rolling spring's too: the loop has no branch and reads
     nothing but the columns."""
-    kt = laws.kt
-    kr = laws.kr
     for q in range(uint64(count)):
         rx = columns[c, C_RX * BLOCK + q]
         ry = columns[c, C_RY * BLOCK + q]
@@ -131,21 +131,14 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
         overlap = -gap
         limit_radius = min(ri, rj)
         excess = overlap / limit_radius if overlap > overlap_limit * limit_radius else 0.0
-        ne = normal_elastic(NORMAL_LINEAR, laws.kn, overlap, ri, rj, False)
-        share = dashpot_share(overlap, vn_d, dt, False) if whole_step else 1.0
-        fn = ne - share * eta * vn_d + cohesion_force(laws.f0, laws.d0, gap)
         row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, columns[c, C_ANGLE_I * BLOCK + q],
                           columns[c, C_ANGLE_J * BLOCK + q], columns[c, C_ANCHOR_I * BLOCK + q],
                           columns[c, C_ANCHOR_J * BLOCK + q], False, 0.0, 0.0, 0.0, columns[c, C_PHI * BLOCK + q])
-        rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)
-        previous = columns[c, C_PREVIOUS * BLOCK + q]
-        trial = tangential.trial_spring(tangential_model, previous, rate, dt, False, row)
-        rate_d = tangential.spring_rate(tangential_model, vt_d, spin_d, alpha)
-        spring, ft, state, slip = tangential.limit(tangential_model, kt, laws.mu, laws.gamma_t, ne, fn, trial, rate_d)
-        roll, moment, rolling_work, rolling_slip = rolling_step(
-            kr, laws.mu_r, laws.gamma_r_factor, columns[c, C_INV_INERTIA * BLOCK + q], ne,
-            columns[c, C_PREVIOUS_ROLL * BLOCK + q], relative_spin, relative_spin_d, dt)
-        moment = moment if kr > 0.0 else 0.0
+        (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, sliding, rolling_work,
+         rolling_slip) = touching_laws(NORMAL_LINEAR, tangential_model, laws, dt, whole_step, overlap, ri, rj, False,
+                                       eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, False,
+                                       columns[c, C_PREVIOUS * BLOCK + q], row, True, columns[c, C_INV_INERTIA * BLOCK + q],
+                                       columns[c, C_PREVIOUS_ROLL * BLOCK + q], relative_spin, relative_spin_d)
         ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
         columns[c, C_HOT * BLOCK + q] = 1.0 if columns[c, C_TOUCHED * BLOCK + q] != 0.0 and gap < 0.0 else 0.0
         columns[c, C_FX * BLOCK + q] = fn * nx + ft_centre * tx
@@ -158,9 +151,9 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
         columns[c, C_SPRING * BLOCK + q] = spring
         columns[c, C_STATUS * BLOCK + q] = state
         columns[c, C_SLIP * BLOCK + q] = slip
-        columns[c, C_NORMAL_DAMPING * BLOCK + q] = share * eta * vn_d * vn_d * dt
-        columns[c, C_TANGENTIAL_WORK * BLOCK + q] = -(ft + kt * spring) * rate_d * dt
-        columns[c, C_SLIDING * BLOCK + q] = 0.5 * kt * (previous + spring) * slip
+        columns[c, C_NORMAL_DAMPING * BLOCK + q] = normal_damping
+        columns[c, C_TANGENTIAL_WORK * BLOCK + q] = tangential_work
+        columns[c, C_SLIDING * BLOCK + q] = sliding
         columns[c, C_ROLL * BLOCK + q] = roll
         columns[c, C_ROLLING_WORK * BLOCK + q] = rolling_work
         columns[c, C_ROLLING_SLIP * BLOCK + q] = rolling_slip
