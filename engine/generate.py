@@ -97,6 +97,22 @@ def random_gas(radius: np.ndarray, region, periodic=(False, False), seed: int = 
     return positions
 
 
+def strip_order(positions: np.ndarray, strip: float) -> np.ndarray:
+    """The order that numbers disks along horizontal strips of height ``strip``, bottom to top,
+    each strip left to right and the next right to left: disks with neighbouring numbers are
+    neighbours in space.
+
+    The engine's threads split the disks and the contact rows by number; numbered at random, each
+    thread's disks lie all over the cell, and every step moves the cache lines of the force buffers
+    and of the disks from one core to the other (a 1400-disk gas of Gilabert's method 2 ran 2.7
+    times slower on two threads than on one). Numbered in strips, a thread's disks are one band of
+    the cell, and only the rows across its edges are shared."""
+    positions = np.asarray(positions, dtype=np.float64)
+    row = np.floor((positions[:, 1] - positions[:, 1].min()) / positive("strip", strip))
+    along = np.where(row % 2 == 0, positions[:, 0], -positions[:, 0])
+    return np.lexsort((along, row))
+
+
 def gas_count_for_fraction(solid_fraction: float, area: float, mean_square_radius: float) -> int:
     """Number of disks of mean square radius ``<r²>`` that fill ``solid_fraction`` of ``area``."""
     fraction = positive("solid_fraction", solid_fraction)

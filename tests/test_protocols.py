@@ -10,7 +10,8 @@ from granlab.engine.analysis.ratchet import deviatoric_strain, ratchet_verdict
 from granlab.engine.protocols.cyclic import CyclicLoad, apply_load, run_cycles, steps_per_cycle
 from granlab.engine.observables import clusters, columns
 from granlab.engine.protocols.equilibrium import equilibrium, measured_pressure
-from granlab.engine.protocols.prepare import gilabert_gas, cell_mass, compress, gilabert_law, method1, method2
+from granlab.engine.protocols.prepare import (cell_mass, compress, gilabert_gas, gilabert_law, gilabert_radii, method1,
+                                               method2)
 
 
 @pytest.fixture(scope="module")
@@ -65,6 +66,21 @@ def test_cell_mass_reads_gilabert_either_way_and_borrows_the_size_of_a_larger_sa
     assert prepared.sim.cell.mass[0] == pytest.approx(2.0 * sim.cell.mass[0], rel=1e-12)
     with pytest.raises(ParameterError, match="cell_mass = 'per-area' is not allowed: one of mass, per-length"):
         cell_mass(r, length, reading="per-area")
+
+
+def test_gilabert_gas_numbers_the_disks_in_strips_so_that_threads_share_few_neighbours():
+    # the engine's two threads take the first and the second half of the disks' numbers: in strips,
+    # few pairs of neighbours straddle the halves (numbered at random, half of them would)
+    r, positions, length = gilabert_gas(1400, 0.36, 1, 1.0)
+    assert np.array_equal(np.sort(r), np.sort(gilabert_radii(1400, 1.0, 1)))
+    sim = Simulation(ParticleState(positions, r, density=4.0 / np.pi), gilabert_law(),
+                     cell=PeriodicCell((length, length)))
+    table = sim.contacts
+    first_half = np.arange(1400) < 700
+    straddling = np.mean(first_half[table.particle_i[:table.count]] != first_half[table.particle_j[:table.count]])
+    assert 0 < straddling < 0.1
+    y = positions[:, 1]
+    assert np.median(y[:700]) < 0.3 * length < 0.7 * length < np.median(y[700:])
 
 
 def test_method2_aggregates_into_one_cluster_in_equilibrium():

@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ParameterError
-from ..generate import radii, random_gas, square_lattice
+from ..generate import radii, random_gas, square_lattice, strip_order
 from ..observables import clusters, columns
 from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, nonnegative, positive, whole
-from ..simulation import Simulation
+from ..simulation import PARALLEL_MIN_DISKS, Simulation
 from ..state import CELL_MASS_FRACTION, ParticleState, default_cell_mass
 from .equilibrium import EquilibriumReport, Progress, advance, equilibrium, measured_pressure, relax
 
@@ -163,14 +163,19 @@ def gilabert_law(friction: float = 0.15, kappa: float = 1e5, cohesion: bool = Tr
 
 def gilabert_gas(count: int, solid_fraction: float, seed: int, diameter: float = 1.0):
     """Gilabert's gas (Sec. III): radii of :func:`gilabert_radii` placed at random without overlap in a
-    periodic square cell at ``solid_fraction``; returns (radii, positions (N, 2), cell length)."""
+    periodic square cell at ``solid_fraction``; returns (radii, positions (N, 2), cell length). From
+    :data:`granlab.engine.simulation.PARALLEL_MIN_DISKS` disks on, where a run takes every thread, the
+    disks are numbered in strips two diameters high (:func:`granlab.engine.generate.strip_order`)."""
     r = gilabert_radii(count, diameter, seed)
     fraction = positive("solid_fraction", solid_fraction)
     if fraction >= 0.55:
         raise ParameterError("solid_fraction", fraction, "a gas fraction below 0.55 (random placement jams)")
     length = math.sqrt(math.pi * float(np.sum(r ** 2)) / fraction)
     positions = random_gas(r, (0.0, length, 0.0, length), periodic=(True, True), seed=seed)
-    return r, positions, length
+    if count < PARALLEL_MIN_DISKS:  # one thread: the numbering does not matter, and the samples stay as they were
+        return r, positions, length
+    order = strip_order(positions, 2.0 * diameter)
+    return r[order], positions[order], length
 
 
 CELL_MASS_READINGS = ("mass", "per-length")
