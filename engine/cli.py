@@ -9,7 +9,7 @@
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
 - ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N] [--rolling {both,RR,noRR}]
-  [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
+  [--threads-per-sample T] [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
   on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`granlab.engine.analysis.report`);
@@ -423,7 +423,7 @@ def _print_rules(rules: list[dict]) -> None:
 _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
                          "max_time": "--max-time", "rolling_damping_ratio": "--rolling-damping",
                          "cell_mass_disks": "--cell-mass-disks", "cell_mass": "--cell-mass",
-                         "rolling": "--rolling"}
+                         "rolling": "--rolling", "threads_per_sample": "--threads-per-sample"}
 
 
 def _reproduce(args) -> dict:
@@ -748,6 +748,10 @@ def _add_reproduce(commands) -> None:
                            help="run the cases with rolling resistance (RR), those without (noRR) or both "
                                 "(default both)")
     reproduce.add_argument("--seed", type=int, help="first seed (default 0)")
+    reproduce.add_argument("--threads-per-sample", type=_positive_int, metavar="T",
+                           help="threads each sample runs on (default 1; the local cluster then has a worker per T "
+                                "cores): for fewer samples than cores; from 1000 disks on, a sample on T threads "
+                                "is another sample than on one")
     folder = reproduce.add_mutually_exclusive_group()
     folder.add_argument("--out", metavar="DIR", help="write the settings and each sample to DIR as it finishes")
     folder.add_argument("--resume", metavar="DIR",

@@ -195,7 +195,10 @@ class Reproduction:
     over the cell size: :data:`granlab.engine.protocols.prepare.CELL_MASS_READINGS`). ``rolling``
     keeps the cases with rolling resistance (``RR``), those without (``noRR``) or ``both``: a sweep of
     the rolling damping needs the RR samples only, and without RR a 1400-disk sample of method 2
-    takes three times as long."""
+    takes three times as long. ``threads_per_sample``: the threads each sample runs on (the local
+    cluster then has a worker per that many cores); a sample of 1000 disks or more on two threads
+    is another sample than on one (its forces are summed in two parts), so the count is a setting
+    of the reproduction, kept in its folder."""
 
     name: str
     particles: int = 100
@@ -206,6 +209,7 @@ class Reproduction:
     cell_mass_disks: int = 1400
     cell_mass: str = "mass"
     rolling: str = "both"
+    threads_per_sample: int = 1
 
     def __post_init__(self):
         from .protocols.prepare import check_cell_mass_reading
@@ -213,7 +217,8 @@ class Reproduction:
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
         for key, least, most in (("particles", 2, STUDY_LIMITS["particles"]), ("samples", 1, STUDY_LIMITS["samples"]),
-                                 ("cell_mass_disks", 1, STUDY_LIMITS["particles"])):
+                                 ("cell_mass_disks", 1, STUDY_LIMITS["particles"]),
+                                 ("threads_per_sample", 1, numba.config.NUMBA_NUM_THREADS)):
             whole(key, getattr(self, key), least, most)
         if not 0 < self.max_time <= MAX_STAGE_TIME:
             raise ParameterError("max_time", self.max_time, f"a duration > 0 and at most {MAX_STAGE_TIME:g} T0 (each "
@@ -267,14 +272,15 @@ def _fractal(snapshot, prefix: str) -> dict:
 
 
 def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
-    """Prepare and measure one sample, on one thread; failures are returned, not raised."""
+    """Prepare and measure one sample on ``reproduction.threads_per_sample`` threads; failures are
+    returned, not raised."""
     from .protocols.equilibrium import equilibrium
     from .protocols.prepare import gilabert_law, method1, method2
 
     start = time.perf_counter()
     row = {"case": case.label, **asdict(case), "seed": seed}
     threads = numba.get_num_threads()
-    numba.set_num_threads(1)
+    numba.set_num_threads(reproduction.threads_per_sample)
     try:
         law = gilabert_law(friction=case.friction, kappa=KAPPA, cohesion=case.cohesive, rolling=case.rolling,
                            pressure=P_STAR, rolling_damping_ratio=reproduction.rolling_damping_ratio)
@@ -477,7 +483,8 @@ def warm_up() -> None:
 def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, workers: int | None = None,
                      progress=None, folder=None) -> dict:
     """Every sample of every case on Dask (see :func:`granlab.engine.studies.run_tasks`), summarised.
-    The cohesive cases with RR, the slowest, are submitted first. With ``folder`` (made by
+    The cohesive cases with RR, the slowest, are submitted first. The local cluster has a worker per
+    ``threads_per_sample`` cores unless ``workers`` says otherwise. With ``folder`` (made by
     :func:`start_folder`), each sample is written there as it finishes and the samples already
     there are not run again (``resumed`` counts them; ``wall_time_s`` is this call's)."""
     from .studies import run_tasks
@@ -490,6 +497,8 @@ def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, w
     tasks = [(reproduction, case, seed) for case in cases for seed in seeds if sample_key(case, seed) not in done]
     resumed = len(rows)
     keys = [f"{reproduction.name}-{sample_key(case, seed)}" for _, case, seed in tasks]
+    if workers is None and scheduler is None:
+        workers = max(1, (os.cpu_count() or 1) // reproduction.threads_per_sample)
     outcomes = run_tasks(gilabert_sample, tasks, keys, scheduler=scheduler, workers=workers, warm_up=warm_up,
                          progress=progress, on_result=None if folder is None else _sample_writer(folder, reproduction)
                          ) if tasks else []

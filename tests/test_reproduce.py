@@ -13,6 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
 
+import numba
 import numpy as np
 import pytest
 
@@ -132,6 +133,27 @@ def test_dask_gives_the_numbers_of_a_serial_run(capsys):
     assert "cohesive, mu = 0.5, RR: 0/2 samples in equilibrium" in printed and "Table III" in printed
 
 
+def test_a_sample_runs_on_the_threads_of_its_reproduction_and_the_cluster_leaves_them_the_cores(monkeypatch):
+    from granlab.engine import studies
+    from granlab.engine.protocols import prepare
+
+    seen = []
+
+    def method1(*args, **kwargs):
+        seen.append(numba.get_num_threads())
+        raise RuntimeError("measured enough")
+
+    monkeypatch.setattr(prepare, "method1", method1)
+    before = numba.get_num_threads()
+    row = gilabert_sample(Reproduction("gilabert-method1", threads_per_sample=2), Case(True, 0.15, False), 0)
+    assert seen == [2] and row["error"] == "RuntimeError: measured enough" and numba.get_num_threads() == before
+    workers = []
+    monkeypatch.setattr(studies, "run_tasks", lambda *args, **kwargs: workers.append(kwargs["workers"]) or [])
+    run_reproduction(Reproduction("gilabert-method1", threads_per_sample=2))
+    run_reproduction(Reproduction("gilabert-method1"))
+    assert workers == [max(1, os.cpu_count() // 2), os.cpu_count()]
+
+
 def test_method1_compresses_the_gas_and_cohesion_keeps_it_looser():
     reproduction = Reproduction("gilabert-method1", particles=40)
     dry = gilabert_sample(reproduction, Case(False, 0.15, False), 0)
@@ -167,6 +189,10 @@ def test_bad_input_is_refused_clearly():
         Reproduction("gilabert-method1", cell_mass="per-area")
     with pytest.raises(ParameterError, match="rolling = 'yes' is not allowed: one of both, RR, noRR"):
         Reproduction("gilabert-method1", rolling="yes")
+    cores = numba.config.NUMBA_NUM_THREADS
+    with pytest.raises(ParameterError, match=f"threads_per_sample = {cores + 1} is not allowed: a whole number from 1 "
+                                             f"to {cores}"):
+        Reproduction("gilabert-method1", threads_per_sample=cores + 1)
     process = granlab("reproduce", "gilabert-method1", "--cell-mass", "per-area")
     assert process.returncode == 2 and "invalid choice: 'per-area' (choose from 'mass', 'per-length')" in process.stderr
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
