@@ -9,8 +9,8 @@
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
 - ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N] [--rolling {both,RR,noRR}]
-  [--threads-per-sample T] [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables measured
-  on Dask beside the published values, each sample written to DIR as it finishes;
+  [--threads-per-sample T] [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables
+  measured on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`granlab.engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.

@@ -104,7 +104,7 @@ def strip_order(positions: np.ndarray, strip: float) -> np.ndarray:
 
     The engine's threads split the disks and the contact rows by number; numbered at random, each
     thread's disks lie all over the cell, and every step moves the cache lines of the force buffers
-    and of the disks from one core to the other (a 1400-disk gas of Gilabert's method 2 ran 2.7
+    and of the disks from one core to the other (a 1400-disk gas of Gilabert's method 2 ran 2.3
     times slower on two threads than on one). Numbered in strips, a thread's disks are one band of
     the cell, and only the rows across its edges are shared."""
     positions = np.asarray(positions, dtype=np.float64)

@@ -137,8 +137,9 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
         (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, sliding, rolling_work,
          rolling_slip) = touching_laws(NORMAL_LINEAR, tangential_model, laws, dt, whole_step, overlap, ri, rj, False,
                                        eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, False,
-                                       columns[c, C_PREVIOUS * BLOCK + q], row, True, columns[c, C_INV_INERTIA * BLOCK + q],
-                                       columns[c, C_PREVIOUS_ROLL * BLOCK + q], relative_spin, relative_spin_d)
+                                       columns[c, C_PREVIOUS * BLOCK + q], row, True,
+                                       columns[c, C_INV_INERTIA * BLOCK + q], columns[c, C_PREVIOUS_ROLL * BLOCK + q],
+                                       relative_spin, relative_spin_d)
         ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
         columns[c, C_HOT * BLOCK + q] = 1.0 if columns[c, C_TOUCHED * BLOCK + q] != 0.0 and gap < 0.0 else 0.0
         columns[c, C_FX * BLOCK + q] = fn * nx + ft_centre * tx

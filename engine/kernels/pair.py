@@ -23,7 +23,8 @@ def touching_laws(normal_model, tangential_model, laws, dt, whole_step, overlap,
     the step, :func:`dashpot_share`, with whole-step dashpots), cohesion, the tangential spring of
     ``tangential_model`` from ``previous`` and, if ``rolling``, the rolling spring from
     ``previous_roll`` (a zero moment without a rolling spring: the gathered pass computes it on
-    every row, with or without, and has no branch). The ``_d`` velocities are the dashpots' (whole-step or half-step).
+    every row, with or without, and has no branch). The ``_d`` velocities are the dashpots'
+    (whole-step or half-step).
 
     Returns ``(F_n, F_t, moment on i, tangential spring, status, slip, rolling spring, normal
     dashpot's work, tangential viscous work, energy the slip lets go, rolling dashpot's work, energy
