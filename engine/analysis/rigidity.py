@@ -3,7 +3,7 @@ and whether the stiffness matrix k is positive definite apart from rigid motions
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -52,9 +52,9 @@ class Rigidity:
         return self.degrees_of_freedom + self.hyperstaticity == self.constraints + self.floppy_modes
 
     def as_dict(self) -> dict:
-        return {"degrees_of_freedom": self.degrees_of_freedom, "constraints": self.constraints,
-                "floppy_modes": self.floppy_modes, "hyperstaticity": self.hyperstaticity, "rank": self.rank,
-                "balanced": self.balanced}
+        counts = asdict(self)
+        del counts["hyperstaticity_measured"]  # said by ``balanced`` (None) and the report's reason
+        return dict(counts, balanced=self.balanced)
 
 
 def rigidity_matrix(net: Network) -> sp.csr_matrix:
