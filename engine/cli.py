@@ -9,8 +9,8 @@
 - ``granlab prepare --method {compress,1,2} [options] [--json]``: a packing in equilibrium;
 - ``granlab study ratchet [options] [--json]``: many samples of cyclic loading on Dask;
 - ``granlab reproduce {gilabert-method1,gilabert-method2} [--paper-size] [--samples S] [--particles N] [--rolling {both,RR,noRR}]
-  [--threads-per-sample T] [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's preparation tables
-  measured on Dask beside the published values, each sample written to DIR as it finishes;
+  [--threads-per-sample T] [--dt-safety F] [--out DIR | --resume DIR | --series DIR...] [--json]``: Gilabert's
+  preparation tables measured on Dask beside the published values, each sample written to DIR as it finishes;
 - ``granlab analyze RUNFILE {stiffness,status,rigidity,packing,fractal} [--frame K] [--json]``:
   quasi-static and structural analysis of one frame (:mod:`granlab.engine.analysis.report`);
 - ``granlab info RUNFILE [--json]``: what a run file holds.
@@ -35,7 +35,7 @@ from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed
 from .io.jsonsafe import jsonable
 from .params import TANGENTIAL, TANGENTIAL_MODELS
-from .protocols.prepare import CELL_MASS_READINGS
+from .protocols.prepare import CELL_MASS_READINGS, GILABERT_DT_SAFETY
 from .reproduce import REPRODUCTIONS, ROLLING_CASES
 
 
@@ -423,7 +423,8 @@ def _print_rules(rules: list[dict]) -> None:
 _REPRODUCTION_OPTIONS = {"particles": "--particles", "samples": "--samples", "first_seed": "--seed",
                          "max_time": "--max-time", "rolling_damping_ratio": "--rolling-damping",
                          "cell_mass_disks": "--cell-mass-disks", "cell_mass": "--cell-mass",
-                         "rolling": "--rolling", "threads_per_sample": "--threads-per-sample"}
+                         "rolling": "--rolling", "threads_per_sample": "--threads-per-sample",
+                         "dt_safety": "--dt-safety"}
 
 
 def _reproduce(args) -> dict:
@@ -752,6 +753,9 @@ def _add_reproduce(commands) -> None:
                            help="threads each sample runs on (default 1; the local cluster then has a worker per T "
                                 "cores): for fewer samples than cores; from 1000 disks on, a sample on T threads "
                                 "is another sample than on one")
+    reproduce.add_argument("--dt-safety", type=_float, metavar="F",
+                           help=f"the time step as a fraction F of the stability bound, in (0, 1] (default "
+                                f"{GILABERT_DT_SAFETY}; 0.3 until 27 Nov 2026: the same tables, twice the time)")
     folder = reproduce.add_mutually_exclusive_group()
     folder.add_argument("--out", metavar="DIR", help="write the settings and each sample to DIR as it finishes")
     folder.add_argument("--resume", metavar="DIR",

@@ -44,7 +44,8 @@ from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
 from .observables import coordination as observed_coordination
-from .params import nonnegative, whole
+from .params import nonnegative, positive, whole
+from .protocols.prepare import GILABERT_DT_SAFETY, check_cell_mass_reading
 from .studies import STUDY_LIMITS
 
 PHI_I = 0.36
@@ -198,7 +199,9 @@ class Reproduction:
     takes three times as long. ``threads_per_sample``: the threads each sample runs on (the local
     cluster then has a worker per that many cores); a sample of 1000 disks or more on two threads
     is another sample than on one (its forces are summed in two parts), so the count is a setting
-    of the reproduction, kept in its folder."""
+    of the reproduction, kept in its folder. ``dt_safety``: the time step as a fraction of the
+    stability bound (:data:`granlab.engine.protocols.prepare.GILABERT_DT_SAFETY`; folders made
+    before it, 27 Nov 2026, ran at 0.3)."""
 
     name: str
     particles: int = 100
@@ -210,10 +213,9 @@ class Reproduction:
     cell_mass: str = "mass"
     rolling: str = "both"
     threads_per_sample: int = 1
+    dt_safety: float = GILABERT_DT_SAFETY
 
     def __post_init__(self):
-        from .protocols.prepare import check_cell_mass_reading
-
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
         for key, least, most in (("particles", 2, STUDY_LIMITS["particles"]), ("samples", 1, STUDY_LIMITS["samples"]),
@@ -224,6 +226,8 @@ class Reproduction:
             raise ParameterError("max_time", self.max_time, f"a duration > 0 and at most {MAX_STAGE_TIME:g} T0 (each "
                                                             f"stage of a sample would otherwise run for days)")
         nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
+        if positive("dt_safety", self.dt_safety) > 1:
+            raise ParameterError("dt_safety", self.dt_safety, "a fraction of the stability bound in (0, 1]")
         check_cell_mass_reading(self.cell_mass)
         if self.rolling not in ROLLING_CASES:
             raise ParameterError("rolling", self.rolling, "one of " + ", ".join(ROLLING_CASES))
@@ -286,7 +290,8 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
                            pressure=P_STAR, rolling_damping_ratio=reproduction.rolling_damping_ratio)
         if reproduction.name == "gilabert-method1":
             prepared = method1(reproduction.particles, PHI_I, P_STAR, law, seed=seed, max_time=reproduction.max_time,
-                               cell_mass_disks=reproduction.cell_mass_disks, cell_mass_reading=reproduction.cell_mass)
+                               cell_mass_disks=reproduction.cell_mass_disks, cell_mass_reading=reproduction.cell_mass,
+                               dt_safety=reproduction.dt_safety)
         else:
             def at_zero_pressure(stage, sim):
                 if stage == "relaxation":
@@ -300,7 +305,7 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
             prepared = method2(reproduction.particles, PHI_I, P_STAR, law, speed=SPEED * math.sqrt(
                 law.cohesion_force * law.cohesion_range), seed=seed, max_strain_rate=MAX_STRAIN_RATE,
                 on_stage=at_zero_pressure, max_time=reproduction.max_time, cell_mass_disks=reproduction.cell_mass_disks,
-                cell_mass_reading=reproduction.cell_mass)
+                cell_mass_reading=reproduction.cell_mass, dt_safety=reproduction.dt_safety)
         snapshot = prepared.sim.snapshot()
         stats = packing_stats(snapshot, prepared.report.force_scale)
         row.update(phi=stats.phi, z=coordination(snapshot, case.cohesive, prepared.report.force_scale),
@@ -442,8 +447,9 @@ def resume_folder(folder) -> Reproduction:
                            f"--out {folder}")
     try:
         settings = json.loads(path.read_text())
-        # folders made before the choice of reading (Nov 2026) used the per-length one
-        return Reproduction(**{"cell_mass": "per-length", **settings})
+        # folders made before the choice of reading (Nov 2026) used the per-length one, and before
+        # the longer step (27 Nov 2026) 0.3 of the bound
+        return Reproduction(**{"cell_mass": "per-length", "dt_safety": 0.3, **settings})
     except (OSError, ValueError, TypeError) as error:
         raise GranLabError(f"{path} is not the settings of a reproduction: {error}") from error
 

@@ -133,20 +133,22 @@ def test_dask_gives_the_numbers_of_a_serial_run(capsys):
     assert "cohesive, mu = 0.5, RR: 0/2 samples in equilibrium" in printed and "Table III" in printed
 
 
-def test_a_sample_runs_on_the_threads_of_its_reproduction_and_the_cluster_leaves_them_the_cores(monkeypatch):
+def test_a_sample_runs_on_the_threads_and_step_of_its_reproduction_and_the_cluster_leaves_them_the_cores(
+        monkeypatch):
     from granlab.engine import studies
     from granlab.engine.protocols import prepare
 
     seen = []
 
     def method1(*args, **kwargs):
-        seen.append(numba.get_num_threads())
+        seen.append((numba.get_num_threads(), kwargs["dt_safety"]))
         raise RuntimeError("measured enough")
 
     monkeypatch.setattr(prepare, "method1", method1)
     before = numba.get_num_threads()
-    row = gilabert_sample(Reproduction("gilabert-method1", threads_per_sample=2), Case(True, 0.15, False), 0)
-    assert seen == [2] and row["error"] == "RuntimeError: measured enough" and numba.get_num_threads() == before
+    row = gilabert_sample(Reproduction("gilabert-method1", threads_per_sample=2, dt_safety=0.45),
+                          Case(True, 0.15, False), 0)
+    assert seen == [(2, 0.45)] and row["error"] == "RuntimeError: measured enough" and numba.get_num_threads() == before
     workers = []
     monkeypatch.setattr(studies, "run_tasks", lambda *args, **kwargs: workers.append(kwargs["workers"]) or [])
     run_reproduction(Reproduction("gilabert-method1", threads_per_sample=2))
@@ -193,6 +195,9 @@ def test_bad_input_is_refused_clearly():
     with pytest.raises(ParameterError, match=f"threads_per_sample = {cores + 1} is not allowed: a whole number from 1 "
                                              f"to {cores}"):
         Reproduction("gilabert-method1", threads_per_sample=cores + 1)
+    with pytest.raises(ParameterError, match=r"dt_safety = 1.5 is not allowed: a fraction of the stability bound in "
+                                             r"\(0, 1\]"):
+        Reproduction("gilabert-method2", dt_safety=1.5)
     process = granlab("reproduce", "gilabert-method1", "--cell-mass", "per-area")
     assert process.returncode == 2 and "invalid choice: 'per-area' (choose from 'mass', 'per-length')" in process.stderr
     process = granlab("reproduce", "gilabert-method1", "--samples", "0")
@@ -362,10 +367,15 @@ def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     assert process.returncode == 2 and "holds no reproduction (settings.json is missing)" in process.stderr
 
 
-def test_a_folder_from_before_the_cell_mass_readings_goes_on_with_the_reading_it_was_made_with(tmp_path):
+def test_a_folder_from_before_a_setting_goes_on_with_the_value_it_was_made_with(tmp_path):
+    # the cell mass readings and the longer step (27 Nov 2026) came after the first folders
     folder = start_folder(tmp_path / "new", Reproduction("gilabert-method1", particles=30))
-    assert resume_folder(folder).cell_mass == "mass"
+    assert resume_folder(folder).cell_mass == "mass" and resume_folder(folder).dt_safety == 0.6
     settings = json.loads((folder / "settings.json").read_text())
     del settings["cell_mass"]
     (folder / "settings.json").write_text(json.dumps(settings))
     assert resume_folder(folder) == Reproduction("gilabert-method1", particles=30, cell_mass="per-length")
+    del settings["dt_safety"]
+    (folder / "settings.json").write_text(json.dumps(settings))
+    assert resume_folder(folder) == Reproduction("gilabert-method1", particles=30, cell_mass="per-length",
+                                                 dt_safety=0.3)
