@@ -65,11 +65,11 @@ disks, and a tenth of tau is 1300 of their steps."""
 GILABERT_DT_SAFETY = 0.6
 """The time step of Gilabert's preparations (methods 1 and 2), as a fraction of the engine's
 stability bound (:func:`granlab.engine.simulation.stability_bound`). That bound assumes 6 contacts on
-every disk; on equilibrated packings of 400 to 5600 disks the highest frequency of the contact
-network is 1.78-1.86 times below it, so 0.6 is a third of the packings' own bound. Against 0.3
-(27 Nov 2026): method 1 at 200 disks, 8 cases x 2 seeds, the same Phi and z to 4 digits in half of
-the cohesive samples and within the seeds' spread in the others; method 2 at 150 disks, 10 seeds,
-Phi and z within one standard error of the mean (docs/gilabert.md). A sample takes half the time."""
+every disk; on equilibrated packings of 150 to 5600 disks the highest frequency of the contact
+network is 1.78-2.0 times below it, so 0.6 is about a third of the packings' own bound. Against
+0.3 (27 Nov 2026): method 1 at 200 disks, 8 cases x 2 seeds, the same Phi and z to 4 digits in 3
+of the 8 cohesive pairs and within the seeds' spread in the others; method 2 at 150 disks, 10
+seeds, Phi and z within 1.3 standard errors (docs/gilabert.md). A sample takes half the time."""
 
 
 def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness: float = 100.0,
