@@ -111,6 +111,14 @@ def nonnegative(name: str, value, allow_inf: bool = False) -> float:
     return value
 
 
+def fraction(name: str, value, of: str) -> float:
+    """A number in (0, 1]: a fraction ``of`` something (the error names it)."""
+    value = positive(name, value)
+    if value > 1:
+        raise ParameterError(name, value, f"a fraction of {of} in (0, 1]")
+    return value
+
+
 def whole(name: str, value, least: int = 0, most: int | None = None) -> int:
     """``value`` as an int: a whole number (not a bool) from ``least`` to ``most`` (no upper bound
     without ``most``)."""
@@ -228,15 +236,10 @@ class Integration(_Replaceable):
         set_ = object.__setattr__
         if self.dt is not None:
             set_(self, "dt", positive("dt", self.dt))
-        safety = positive("dt_safety", self.dt_safety)
-        if safety > 1:
-            raise ParameterError("dt_safety", safety, "a fraction of the stability bound in (0, 1]")
-        set_(self, "dt_safety", safety)
+        set_(self, "dt_safety", fraction("dt_safety", self.dt_safety, "the stability bound"))
         if self.skin is not None:
             set_(self, "skin", positive("skin", self.skin))
-        overlap = positive("max_overlap", self.max_overlap)
-        if overlap > 1:
-            raise ParameterError("max_overlap", overlap, "a fraction of the radius in (0, 1]")
+        overlap = fraction("max_overlap", self.max_overlap, "the radius")
         set_(self, "max_overlap", overlap)
         initial = nonnegative("initial_overlap", self.initial_overlap)
         if initial >= overlap:

@@ -44,7 +44,7 @@ from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
 from .io.jsonsafe import jsonable
 from .observables import coordination as observed_coordination
-from .params import nonnegative, positive, whole
+from .params import fraction, nonnegative, whole
 from .protocols.prepare import GILABERT_DT_SAFETY, check_cell_mass_reading
 from .studies import STUDY_LIMITS
 
@@ -226,8 +226,7 @@ class Reproduction:
             raise ParameterError("max_time", self.max_time, f"a duration > 0 and at most {MAX_STAGE_TIME:g} T0 (each "
                                                             f"stage of a sample would otherwise run for days)")
         nonnegative("rolling_damping_ratio", self.rolling_damping_ratio)
-        if positive("dt_safety", self.dt_safety) > 1:
-            raise ParameterError("dt_safety", self.dt_safety, "a fraction of the stability bound in (0, 1]")
+        fraction("dt_safety", self.dt_safety, "the stability bound")
         check_cell_mass_reading(self.cell_mass)
         if self.rolling not in ROLLING_CASES:
             raise ParameterError("rolling", self.rolling, "one of " + ", ".join(ROLLING_CASES))

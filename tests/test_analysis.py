@@ -58,33 +58,20 @@ def test_rumpf_relation_on_a_prepared_packing():
 def test_the_preparations_step_is_within_a_third_of_the_packings_own_stability_bound():
     """The time step of Gilabert's preparations (GILABERT_DT_SAFETY of the engine's bound, which
     assumes 6 contacts on every disk) against the highest frequency of the packing's own contact
-    network, found by brute force: the eigenvalues of M^-1/2 K M^-1/2 for normal and tangential
-    springs on x, y and the rotation of every disk."""
+    network, found by brute force: the largest eigenvalue of M^-1/2 k M^-1/2, k the stiffness
+    matrix with every contact sticking, on the disks' velocities (x, y and r w, whose mass is I/r²)."""
     sim = method1_packing()
-    c = sim.snapshot().contacts
-    touching = (c.surface_gap <= 0.0) & (c.j < sim.particles.count)
-    i, j = c.i[touching], c.j[touching]
-    x, r = sim.particles.position, sim.particles.radius
-    branch = x[i] - x[j] - c.image[touching] * sim.cell.length
-    n = branch / np.hypot(branch[:, 0], branch[:, 1])[:, None]
-    t = np.column_stack([-n[:, 1], n[:, 0]])
-    rows = np.arange(len(i))
-    b = np.zeros((2 * len(i), 3 * sim.particles.count))  # normal then tangential relative displacements
-    for axis in range(2):
-        b[rows, 3 * i + axis], b[rows, 3 * j + axis] = n[:, axis], -n[:, axis]
-        b[len(i) + rows, 3 * i + axis], b[len(i) + rows, 3 * j + axis] = t[:, axis], -t[:, axis]
-    b[len(i) + rows, 3 * i + 2], b[len(i) + rows, 3 * j + 2] = r[i], r[j]
-    law = sim.law
-    k = b.T @ np.diag(np.r_[np.full(len(i), law.normal_stiffness), np.full(len(i), law.tangential_stiffness)]) @ b
-    scale = np.sqrt(np.column_stack([sim.particles.inv_mass, sim.particles.inv_mass,
-                                     sim.particles.inv_inertia]).ravel())
+    net = st.network(sim.snapshot())
+    dof = 3 * sim.particles.count
+    k = st.stiffness_matrix(net, sliding=np.zeros(net.contacts, dtype=bool)).toarray()[:dof, :dof]
+    p = sim.particles
+    scale = np.sqrt(np.column_stack([p.inv_mass, p.inv_mass, p.inv_inertia * p.radius ** 2]).ravel())
     omega = math.sqrt(np.linalg.eigvalsh(scale[:, None] * k * scale[None, :])[-1])
-    zeta = law.damping_ratio
+    zeta = sim.law.damping_ratio
     own_bound = 2.0 * (math.sqrt(1.0 + zeta * zeta) - zeta) / omega
     assert sim.integration.dt_safety == prepare.GILABERT_DT_SAFETY and sim.dt == pytest.approx(sim.auto_dt(), rel=1e-12)
     # the engine's bound is twice this packing's own (on packings of 400-5600 disks, 1.78-1.86 times)
     assert 0.25 < sim.dt / own_bound < 0.4
-
 
 def chain_state(forces, periodic=True, walls=False):
     """Disks of radius 0.5 in a row along x (touching, one per unit length), joined by contacts
