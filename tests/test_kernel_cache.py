@@ -1,5 +1,6 @@
 """The on-disk kernel cache is invalidated by a change to any kernel source, not only the kernel's own."""
 
+import os
 import re
 from pathlib import Path
 
@@ -45,3 +46,27 @@ def test_every_numba_kernel_lives_in_the_kernels_package_under_its_stamp():
     assert elsewhere == []
     for dispatcher in (fields.contact_fields, grid.paint_disks, grid.shell_sums, grid.label_moments):
         assert type(dispatcher._cache._impl.locator).__name__.startswith("Kernels")
+
+
+def test_stamps_of_earlier_sources_are_removed_but_the_most_recently_used(tmp_path):
+    """Each edit of a kernel source compiles a stamp of about 30 MB: a checkout followed for a
+    month kept gigabytes. The stamp in use and the two used last before it stay."""
+    ages = {"stamp-current": 50, "stamp-a": 10, "stamp-b": 40, "stamp-c": 30, "stamp-d": 20}
+    for name, age in ages.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "kernel.nbi").write_bytes(b"index")
+        when = 1_700_000_000 - age * 3600
+        os.utime(tmp_path / name, (when, when))
+    (tmp_path / "jit.cpython-311.pyc").write_bytes(b"bytecode")
+    (tmp_path / "stamp-file").write_bytes(b"not a folder")
+
+    jit.prune_stamps(str(tmp_path), "stamp-current")
+
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "jit.cpython-311.pyc", "stamp-a", "stamp-current", "stamp-d", "stamp-file"]
+    assert (tmp_path / "stamp-current").stat().st_mtime > 1_700_000_000  # marked used now
+
+
+def test_a_folder_that_cannot_be_read_is_left_as_it_is(tmp_path):
+    jit.prune_stamps(str(tmp_path / "missing"), "stamp-current")
+    assert not (tmp_path / "missing").exists()

@@ -17,6 +17,8 @@ every kernel that calls it.
 
 import functools
 import hashlib
+import os
+import shutil
 from pathlib import Path
 
 import numba
@@ -57,6 +59,31 @@ def package_stamp() -> str:
     return sources_stamp(SOURCES)
 
 
+#: stamp folders kept beside the one in use, the most recently used first: a checkout moved back a
+#: commit or two (or a lab still running the code before an edit) finds its kernels compiled.
+KEPT_STAMPS = 2
+
+
+@functools.lru_cache(maxsize=None)
+def prune_stamps(folder: str, current: str) -> None:
+    """Mark ``folder/current`` used now and remove the stamp folders beside it but the
+    :data:`KEPT_STAMPS` most recently used: each edit of a kernel source compiles a new stamp
+    (about 30 MB), which nothing else would remove. Once per folder and process; a folder that
+    cannot be read or written is left as it is (Numba then caches elsewhere or not at all), and
+    a process that finds its stamp removed compiles again."""
+    try:
+        with os.scandir(folder) as entries:
+            others = [entry for entry in entries if entry.name.startswith("stamp-") and entry.name != current
+                      and entry.is_dir(follow_symlinks=False)]
+        if os.path.isdir(os.path.join(folder, current)):
+            os.utime(os.path.join(folder, current))
+        others.sort(key=lambda entry: entry.stat().st_mtime, reverse=True)
+    except OSError:
+        return
+    for entry in others[KEPT_STAMPS:]:
+        shutil.rmtree(entry.path, ignore_errors=True)
+
+
 class _PackageStamped:
     """A Numba cache locator for the kernels of this package, stamped by :func:`package_stamp`.
 
@@ -69,7 +96,10 @@ class _PackageStamped:
         return package_stamp()
 
     def get_cache_path(self):
-        return str(Path(super().get_cache_path()) / f"stamp-{package_stamp()[:16]}")
+        folder = super().get_cache_path()
+        current = f"stamp-{package_stamp()[:16]}"
+        prune_stamps(folder, current)
+        return str(Path(folder) / current)
 
     @classmethod
     def from_function(cls, py_func, py_file):
