@@ -366,3 +366,26 @@ def test_k_with_the_cells_two_strain_degrees_of_freedom_predicts_the_engines_for
     assert increment[3 * n:] == pytest.approx(net.external[3 * n:] / np.linalg.norm(net.external[3 * n:]))
     with pytest.raises(GranLabError, match="load 'cell' needs a periodic cell under stress control"):
         load_increment(network(packed_box("cundall-strack").snapshot()), "cell")
+
+
+def test_a_random_load_on_a_pair_of_disks_alone_is_none_and_excites_nothing():
+    """The closed-path preset's two disks: no disk has two interactions, so a random load has
+    nothing to push. It was a 0/0 (NaN) increment, with warnings on the lab's console."""
+    import warnings
+
+    from granlab.engine.analysis.report import analyze
+    from granlab.engine.analysis.states import PackingState
+    from granlab.engine.analysis.stiffness import load_increment
+    from granlab.engine.protocols.presets import make_preset, preset_settings
+
+    pair = make_preset("closed-path", preset_settings("closed-path"))
+    pair.advance(3000)
+    state = PackingState.from_snapshot(pair.sim.snapshot())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        increment, kind = load_increment(network(state))
+        stiffness_report, status_report = analyze(state, "stiffness"), analyze(state, "status")
+    assert kind == "none" and not increment.any()
+    assert stiffness_report.values["load"] == status_report.values["load"] == "none"
+    assert stiffness_report.values["null_modes"] == 4 and stiffness_report.values["collapse"] is False
+    assert stiffness_report.texts["load"].startswith("none: no disk touches two others")

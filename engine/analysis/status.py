@@ -47,14 +47,10 @@ def critical_contacts(net: Network, tolerance: float = 1e-6) -> np.ndarray:
     return np.flatnonzero(on_cone)
 
 
-def v_tilde(net: Network, v: np.ndarray) -> np.ndarray:
-    """Ṽ = mu (K_n/K_t) V_n + V_t sgn D_t per contact (quasi-rigidity Eq. 10): dF̃/dt = -K_t Ṽ for
-    a non-sliding contact (Eq. 11), so Ṽ > 0 would carry it out of the cone."""
-    return _v_tilde(net, relative_velocities(net, v), slice(None))
-
-
 def _v_tilde(net: Network, rel: np.ndarray, rows) -> np.ndarray:
-    """Eq. 10 for the contacts ``rows`` from their relative velocities ``rel`` (normal, tangential)."""
+    """Ṽ = mu (K_n/K_t) V_n + V_t sgn D_t (quasi-rigidity Eq. 10) for the contacts ``rows`` from their
+    relative velocities ``rel`` (normal, tangential): dF̃/dt = -K_t Ṽ for a non-sliding contact
+    (Eq. 11), so Ṽ > 0 would carry it out of the cone. Critical contacts only: mu is finite there."""
     kt = np.where(net.kt[rows] > 0.0, net.kt[rows], np.inf)
     return net.friction * net.kn[rows] / kt * rel[:, 0] + rel[:, 1] * net.sign_dt[rows]
 
@@ -73,7 +69,7 @@ def consistency(net: Network, load_increment: np.ndarray, critical: np.ndarray,
     (sliding needs Ṽ > 0, non-sliding Ṽ <= 0)."""
     bits = np.asarray(bits, dtype=bool)
     v = response(net, load_increment, _sliding_set(net, critical, bits))
-    vt = v_tilde(net, v)[critical]
+    vt = _v_tilde(net, relative_velocities(net, v)[critical], critical)
     return v, vt, np.where(bits, vt > 0.0, vt <= 0.0)
 
 

@@ -480,7 +480,8 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
 MODE_VECTORS = 400
 """Null modes of k the stiffness analysis computes and classifies; more are only counted."""
 LOAD_TEXTS = {"walls": "the walls' loads raised in proportion",
-              "random": "random forces on the disks, adding up to zero (seeded)"}
+              "random": "random forces on the disks, adding up to zero (seeded)",
+              "none": "none: no disk touches two others (or a wall and another) for a random force to push"}
 
 
 def unclassified(max_vectors: int) -> str:
@@ -505,7 +506,8 @@ def load_increment(net: Network, load: str = "auto", seed: int = 0) -> tuple[np.
     ``auto`` takes ``walls`` when walls are loaded and ``random`` otherwise. The random forces act
     on the disks with at least two interactions and add up to zero, so they excite neither
     rattlers, nor a disk hanging by one contact (a mechanism of its own), nor a translation of the
-    whole. The principle of minimum sliding holds for any increment."""
+    whole; with no such disk (a pair of disks alone) the increment is zero, named ``none``. The
+    principle of minimum sliding holds for any increment."""
     if load not in LOADS:
         raise ParameterError("load", load, f"one of {', '.join(LOADS)}")
     walls = _load_on(net, net.wall_dof)
@@ -525,6 +527,8 @@ def load_increment(net: Network, load: str = "auto", seed: int = 0) -> tuple[np.
     interactions = np.bincount(net.first, minlength=net.disks) + np.bincount(net.second[net.second >= 0],
                                                                              minlength=net.disks)
     bound = np.flatnonzero(interactions >= 2)
+    if len(bound) == 0:
+        return out, "none"
     forces = rng.normal(size=(len(bound), 2))
     forces -= forces.mean(axis=0)
     out[3 * bound], out[3 * bound + 1] = forces[:, 0], forces[:, 1]
