@@ -14,7 +14,7 @@ from granlab.app.lab import lessons
 from granlab.app.lab.dashboard import SPEEDS
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
-from tests.test_browser import http_status, lab_only, open_dashboard, status, wait_model, wait_status
+from tests.test_browser import http_status, lab_only, open_dashboard, scene, status, wait_model, wait_status
 
 
 @pytest.fixture(scope="module")
@@ -414,6 +414,47 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     page.keyboard.press("Space")  # on again
     wait_model(page, "figure-coulomb-cone", thick)
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
+
+
+MECHANISM_PIXELS = """() => { const c = document.querySelector("canvas"), d = c.getContext("2d").getImageData(0, 0,
+  c.width, c.height).data, [r, g, b] = [1, 3, 5].map(k => parseInt(granlabScene.style.mechanism.slice(k, k + 2), 16));
+  let k = 0;
+  for (let i = 0; i < d.length; i += 4) {
+    if (Math.abs(d[i] - r) + Math.abs(d[i + 1] - g) + Math.abs(d[i + 2] - b) < 12) k++ }
+  return k }"""
+"""Pixels of a viewer's 2D scene in the colour of a mechanism's arrows."""
+
+
+def test_a_viewers_scene_draws_the_mechanism_the_presenters_analysis_found(browser, lab):
+    """The block preset's one mechanism (the block sliding along its wall): the presenter pauses and
+    runs the stiffness analysis, which draws it as an arrow over the 3D scene; a viewer's 2D scene
+    draws the same arrow (a paused run's frames still come), and loses it with the next analysis."""
+    presenter = browser.new_page(viewport={"width": 1366, "height": 768})
+    open_dashboard(presenter, lab, "block")
+    wait_status(lab, lambda s: s["state"] == "running")
+    viewer = browser.new_page(viewport={"width": 1366, "height": 768})
+    lab_only(viewer, lab)
+    viewer.goto(lab["url"].split("?")[0] + "viewer-scene")
+    viewer.wait_for_function("() => window.granlabScene && granlabScene.drawn > 0", polling=200, timeout=60000)
+    presenter.click(".play-button button")
+    wait_status(lab, lambda s: s["state"] == "paused")
+    before = status(lab)["analysis_seq"]
+    presenter.locator(".pane-choice button", has_text="Analysis").click()
+    presenter.select_option(".analysis-select select", value="stiffness")
+    presenter.click(".analysis-button button")
+    wait_status(lab, lambda s: s["analysis_seq"] > before, timeout=60)
+    wait_status(lab, lambda s: s["mechanism"], timeout=30, read=scene)
+    viewer.wait_for_function("() => granlabScene.arrows.length > 0", polling=200, timeout=30000)
+    assert len(viewer.evaluate("() => Array.from(granlabScene.arrows)")) % 12 == 0  # shaft and head: x0 y0 x1 y1
+    viewer.wait_for_function(f"() => ({MECHANISM_PIXELS})() > 100", polling=200, timeout=30000)  # drawn, on top
+    presenter.select_option(".analysis-select select", value="packing")  # another analysis takes it away
+    presenter.click(".analysis-button button")
+    viewer.wait_for_function("() => granlabScene.arrows.length === 0", polling=200, timeout=60000)
+    viewer.wait_for_function(f"() => ({MECHANISM_PIXELS})() === 0", polling=200, timeout=30000)
+    presenter.click(".play-button button")
+    wait_status(lab, lambda s: s["state"] == "running")
+    viewer.close()
+    presenter.close()
 
 
 @pytest.fixture(scope="module")

@@ -17,16 +17,20 @@ class Page:
         self.seq = -1
         self.header = None
         self.a: dict[str, np.ndarray] = {}
+        self.arrows = np.zeros((0, 2, 2), dtype=np.float32)
 
     def apply(self, message: bytes) -> None:
         header, parts = unpack(message)
         if header["key"]:
             self.a = {name: parts[name][0].copy() for name in ("pos", "angle", "color", "radius", "ci", "cj", "cls",
                                                                "far")}
+            self.arrows = parts["arrows"][0].reshape(-1, 2, 2)
         else:
             if header["seq"] <= self.seq:
                 return
             assert header["seq"] == self.seq + 1, "a message missed"
+            if "arrows" in parts:
+                self.arrows = parts["arrows"][0].reshape(-1, 2, 2)
             for name in ("pos", "angle", "color"):
                 self.a[name] = self.a[name] + parts[name][0]
             if "radius" in parts:
@@ -140,6 +144,27 @@ def test_a_boxs_walls_meet_at_its_corners_and_frame_the_picture():
         (xmax, ymax) == pytest.approx(tuple(corners.max(axis=0)))
 
 
+def test_the_arrows_of_a_mechanism_reach_every_page_once_and_a_page_that_opens_later():
+    """The presenter's stiffness analysis draws arrows over the 3D scene; a viewer's 2D scene draws
+    them too. They travel in the frame where they change and in key frames only."""
+    encoder = Encoder()
+    frames = list(frames_of("ratchet16", 5, 50))
+    arrows = np.array([[[1.0, 2.0], [1.5, 2.25]], [[1.5, 2.25], [1.4, 2.3]], [[-3.0, 0.5], [-3.0, 1.5]]])
+    page = Page()
+    sent = []
+    for k, frame in enumerate(frames):
+        message = encoder.encode(frame, "rotation", arrows if 1 <= k <= 3 else None)
+        sent.append("arrows" in unpack(message)[1])
+        page.apply(message)
+        assert_shows(page, frame, "rotation")
+        if k == 2:
+            late = Page()
+            late.apply(encoder.keyframe())
+            assert np.array_equal(late.arrows, arrows.astype(np.float32))
+        assert np.array_equal(page.arrows, arrows.astype(np.float32) if 1 <= k <= 3 else np.zeros((0, 2, 2)))
+    assert sent == [True, True, False, False, True]  # the key frame, then where they come and go
+
+
 class FakeSocket:
     def __init__(self):
         self.in_flight = 0
@@ -206,7 +231,7 @@ def test_the_stream_sends_as_many_frames_as_its_budget_allows_within_its_rates(m
     clock = [100.0]
     monkeypatch.setattr(stream_module.time, "monotonic", lambda: clock[0])
     stream = stream_module.ViewerStream(io_loop=FakeLoop())
-    monkeypatch.setattr(stream.encoder, "encode", lambda frame, field: b"x" * size)
+    monkeypatch.setattr(stream.encoder, "encode", lambda frame, field, arrows: b"x" * size)
     for _ in range(round(10.0 / 0.045)):
         stream.publish(None, "rotation")
         clock[0] += 0.045

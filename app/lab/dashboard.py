@@ -459,9 +459,10 @@ class Dashboard:
         self.analysis_text = pn.pane.HTML(
             "<p>Pick an analysis and press the button: it runs on the state of that moment, on its own thread, "
             "while the simulation goes on. <i>status</i>: the critical contacts and the consistent state by "
-            "minimum sliding, drawn as a force network; <i>stiffness</i>: the mechanism, as green arrows in the "
-            "3D scene; <i>rigidity</i>: Gilabert's counts; <i>packing</i>: Φ, z, forces, with the (N, T) scatter; "
-            "<i>fractal</i>: I(k) and its fit.</p>", css_classes=["analysis-summary"], sizing_mode="stretch_width")
+            "minimum sliding, drawn as a force network; <i>stiffness</i>: the mechanism, as arrows in the scene "
+            "(their colour in its legend); <i>rigidity</i>: Gilabert's counts; <i>packing</i>: Φ, z, forces, "
+            "with the (N, T) scatter; <i>fractal</i>: I(k) and its fit.</p>",
+            css_classes=["analysis-summary"], sizing_mode="stretch_width")
         self.analysis_plots = AnalysisFigures()
         for fig in self.analysis_plots.figures.values():
             fig.visible = False  # a hidden pane alone still draws its figure's empty frame

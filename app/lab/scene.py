@@ -209,6 +209,7 @@ class SceneView:
         self.frames_pushed = 0
 
         self._frame: SceneFrame | None = None
+        self._arrows = np.zeros((0, 2, 2))
         self._framed = (0.0, 0.0, 0.0)  # centre x, y and half-width of the square the camera shows
         self._disks: viser.BatchedMeshHandle | None = None
         self._disk_top = 0.0
@@ -330,8 +331,13 @@ class SceneView:
         Analysis tab, where the disks were when it was analysed. No segments hide them."""
         with self._lock, self._server.atomic():
             z = 3.0 * self._disk_top + DISK_HEIGHT * mean_radius
-            self._show(self._mechanism, _segments_3d(np.asarray(segments, dtype=float).reshape(-1, 2, 2), z),
-                       MECHANISM_THICKNESS * mean_radius)
+            self._arrows = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+            self._show(self._mechanism, _segments_3d(self._arrows, z), MECHANISM_THICKNESS * mean_radius)
+
+    @property
+    def arrows(self) -> np.ndarray:
+        """The (S, 2, 2) segments :meth:`show_arrows` shows (S = 0: none)."""
+        return self._arrows
 
     def close(self) -> None:
         """Stop the viser server."""

@@ -293,7 +293,7 @@ class Lab:
             if frame is not None:
                 self.scene.draw(frame)
                 if self.stream.sockets:
-                    self.stream.publish(frame, self.scene.color_field)
+                    self.stream.publish(frame, self.scene.color_field, self.scene.arrows)
                 self._stop.wait(max(0.0, self.scene_interval - (time.perf_counter() - start)))
 
     @property

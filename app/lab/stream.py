@@ -13,6 +13,8 @@ scene on a 2D canvas instead (``static/viewer/scene.html``), fed by this stream:
   the contacts as those gone (the steps between their ascending rows) and those added (sorted by
   their first disk: the steps between those, and each second disk less its first), then the
   change of each one's byte;
+- the arrows of a mechanism the presenter's analysis found (float32 segments, x0 y0 x1 y1 each) in a
+  key frame and in the frame where they change, not in the others;
 - a key frame (every array whole) to a page that opens, or falls behind, or when the box, the
   number of disks or the colour field changes;
 - 16-bit arrays as their low bytes then their high bytes (small changes leave the high bytes 0 or 255),
@@ -41,8 +43,10 @@ import tornado.websocket
 
 from granlab.engine.frames import meeting_walls
 
-from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, PALETTES, SPOKE_COLOR,
-                             WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes, frame_bounds)
+from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, MECHANISM_COLOR, PALETTES,
+                             SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes,
+                             frame_bounds)
+from .scene import MECHANISM_THICKNESS
 
 MAX_IN_FLIGHT = 8
 """Messages a socket may have on their way (written, not yet handed to the network) before it
@@ -79,7 +83,8 @@ def style() -> dict:
     """The colours and widths the page draws with (those of the 3D scene)."""
     return {"spoke": _hex(SPOKE_COLOR), "wall": _hex(WALL_COLOR), "cell": _hex(CELL_COLOR),
             "kinds": [_hex(color) for _, color in CONTACT_KINDS], "watched": [_hex(c) for c in WATCHED_COLORS],
-            "classes": FORCE_CLASSES, "forceWidth": MAX_FORCE_THICKNESS, "watchedWidth": WATCHED_THICKNESS}
+            "classes": FORCE_CLASSES, "forceWidth": MAX_FORCE_THICKNESS, "watchedWidth": WATCHED_THICKNESS,
+            "mechanism": _hex(MECHANISM_COLOR), "mechanismWidth": MECHANISM_THICKNESS}
 
 
 def _pack(header: dict, parts: list[tuple]) -> bytes:
@@ -142,13 +147,18 @@ class Encoder:
         self._index = np.zeros(0, dtype=np.intp)
         self._scratch = np.zeros(0)
         self._key: tuple[int, bytes] | None = None  # the last key frame made, by seq
+        self._arrows = np.zeros(0, dtype=np.float32)
 
-    def encode(self, frame, field: str) -> bytes:
-        """The message that brings a page from the last frame to ``frame`` coloured by ``field``; a
-        ValueError, and the stream as it was, for a frame whose disks are not all at finite places."""
+    def encode(self, frame, field: str, arrows: np.ndarray | None = None) -> bytes:
+        """The message that brings a page from the last frame to ``frame`` coloured by ``field``, with
+        the (S, 2, 2) segments ``arrows`` over it (None: none); a ValueError, and the stream as it
+        was, for a frame whose disks are not all at finite places."""
         if not (np.isfinite(frame.positions).all() and np.isfinite(frame.radii).all()):
             raise ValueError("a frame with disks at non-finite places (a diverging run) is not sent to viewers")
+        drawn = np.zeros(0, dtype=np.float32) if arrows is None else np.asarray(arrows, dtype=np.float32).ravel()
         with self._lock:
+            arrows_changed = not np.array_equal(drawn, self._arrows)
+            self._arrows = drawn
             n = len(frame.radii)
             frame = dataclasses.replace(frame, walls=_meeting(frame))
             bounds = frame_bounds(frame)
@@ -168,6 +178,8 @@ class Encoder:
             if not np.array_equal(state["radius"], previous["radius"]):
                 parts.append(("radius", state["radius"], "abs"))
             parts += self._contact_parts(previous, state)
+            if arrows_changed:
+                parts.append(("arrows", drawn, "abs"))
             return _pack({**self._header, "seq": self.seq, "key": False}, parts)
 
     def keyframe(self) -> bytes | None:
@@ -184,6 +196,7 @@ class Encoder:
     def _make_keyframe(self) -> bytes:
         s = self._state
         parts = [(name, s[name], "abs") for name in ("pos", "angle", "color", "radius", "ci", "cj", "cls", "far")]
+        parts.append(("arrows", self._arrows, "abs"))
         header = {**self._header, "seq": self.seq, "key": True, "field": self._field,
                   "palette": [_hex(c) for c in PALETTES[self._field]], "style": style()}
         return _pack(header, parts)
@@ -304,12 +317,12 @@ class ViewerStream:
         self._due = 0.0
         self._size = 0.0  # of a message, a running mean
 
-    def publish(self, frame, field: str) -> None:
+    def publish(self, frame, field: str, arrows: np.ndarray | None = None) -> None:
         now = time.monotonic()
         if self.io_loop is None or now < self._due:
             return
         try:
-            message = self.encoder.encode(frame, field)
+            message = self.encoder.encode(frame, field, arrows)
         except ValueError:  # the pages keep the last frame they could draw
             return
         self._size += 0.2 * (len(message) - self._size)
