@@ -59,7 +59,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     run writes its restored last good state as the last checkpoint. ``out`` is never the resumed
     file, and an existing ``out`` is written over only with ``force``. ``progress(done, total,
     sim)`` is called about four times a second of wall time (the steps run in slices that long;
-    a run split so continues bit for bit)."""
+    a run split so continues bit for bit), not after the last slice: the result follows."""
     from .io import h5md
     from .io.outputs import check_output
     from .io.scene import load_scene, parse_scene
@@ -120,7 +120,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
                 done += steps
                 block -= steps
                 slice_steps = max(1, int(steps * 0.25 / max(time.perf_counter() - began, 1e-6)))
-                if progress is not None:
+                if progress is not None and done < total:
                     progress(done, total, sim)
             record()
         if writer is not None:
