@@ -299,6 +299,8 @@ def _prepare(args) -> dict:
 
     if args.out:
         check_output(args.out, force=args.force)
+    if args.method == "compress" and args.dt_safety is not None:
+        raise ParameterError("--dt-safety", args.dt_safety, "an option of --method 1 and 2 only")
     if args.method == "compress":
         prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
                                     friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0,
@@ -307,8 +309,9 @@ def _prepare(args) -> dict:
         law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
                                    cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
                                    pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
+        args.dt_safety = GILABERT_DT_SAFETY if args.dt_safety is None else args.dt_safety  # the run file keeps it
         common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
-                      seed=args.seed, progress=_progress_line)
+                      seed=args.seed, progress=_progress_line, dt_safety=args.dt_safety)
         if args.method == "1":
             prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
         else:
@@ -689,6 +692,9 @@ def _add_prepare(commands) -> None:
     prepare.add_argument("--speed", type=_float, help="V0 of method 2 (default V* = sqrt(F0 D0))")
     prepare.add_argument("--accelerated", action="store_true", help="method 2 series B: soft, then stiffened")
     prepare.add_argument("--max-time", type=_float, help="simulated-time limit of each stage")
+    prepare.add_argument("--dt-safety", type=_float, metavar="F",
+                         help=f"methods 1 and 2: the time step as a fraction F of the stability bound, in (0, 1] "
+                              f"(default {GILABERT_DT_SAFETY}; 0.3 until 27 Nov 2026)")
     prepare.add_argument("--out", help="write the packing to a run file")
     prepare.add_argument("--force", action="store_true", help="write over an existing --out file")
     prepare.add_argument("--json", action="store_true", help="print one JSON object")

@@ -145,6 +145,8 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     (["reproduce", "gilabert-method1", "--samples", "100000000"], "samples = 100000000 is not allowed: a whole number from 1 to"),
     (["reproduce", "gilabert-method1", "--workers", "100000"], "--workers = 100000 is not allowed: from 1 to 256"),
     (["reproduce", "gilabert-method1", "--max-time", "1e300"], "max_time = 1e+300 is not allowed: a duration > 0 and at most"),
+    (["prepare", "--method", "1", "--dt-safety", "1.5"], "dt_safety = 1.5 is not allowed: a fraction of the"),
+    (["prepare", "--method", "compress", "--dt-safety", "0.5"], "--dt-safety = 0.5 is not allowed: an option of"),
 ])
 def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, monkeypatch, args, message):
     from granlab.engine import cli
@@ -154,6 +156,18 @@ def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, 
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and message in error
     assert list(tmp_path.iterdir()) == []  # no folder made, no cluster started
+
+
+def test_a_prepared_packings_run_file_keeps_the_step_it_was_made_with(tmp_path):
+    import h5py
+
+    from granlab.engine.protocols.prepare import GILABERT_DT_SAFETY
+
+    for given, kept in ((["--dt-safety", "0.3"], 0.3), ([], GILABERT_DT_SAFETY)):
+        out = tmp_path / f"packing{len(given)}.h5"
+        granlab("prepare", "--method", "1", "--particles", "20", *given, "--out", str(out))
+        with h5py.File(out) as f:
+            assert json.loads(f["parameters"].attrs["protocol_json"])["dt_safety"] == kept
 
 
 def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
