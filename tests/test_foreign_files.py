@@ -9,7 +9,7 @@ import pytest
 
 from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.packing import packing_stats
-from granlab.engine.analysis.rigidity import rigidity
+from granlab.engine.analysis.rigidity import rigidity, rigidity_matrix, self_stress_states
 from granlab.engine.analysis.states import read_state
 from granlab.engine.io.lammps import Dump
 from tests.test_cli import granlab
@@ -71,6 +71,8 @@ def test_the_lammps_packing_with_its_contacts_agrees_with_the_packing_rebuilt_fr
         counts = rigidity(st.network(state))
         assert (counts.degrees_of_freedom, counts.constraints, counts.floppy_modes, counts.hyperstaticity) == \
             brute_force_rigidity(state)
+        # H as packings of more than 1500 constraints get it: the inertia of [[-I, G^T], [G, -t I]]
+        assert self_stress_states(rigidity_matrix(st.network(state)), dense_size=0) == counts.hyperstaticity
 
 
 def test_the_forces_read_from_pair_local_balance_on_every_disk():
