@@ -3,14 +3,15 @@ transform of a disk, Eq. 29 gives the radius of circular and square holes, holes
 periodic edges count once, and bad input is refused with a clear message."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 import scipy.special
 
 from granlab.engine.analysis.fractal import (MAX_CELLS, FitError, curdled_packing, default_spacing, density_field,
-                                             fit_structure, fractal_analysis, grid_shape, hole_radii, structure_factor,
-                                             structure_model, weighted_hole_radius)
+                                             ell_of_amplitude, fit_structure, fractal_analysis, grid_shape, hole_radii,
+                                             structure_factor, structure_model, weighted_hole_radius)
 from granlab.engine.errors import GranLabError, ParameterError
 from granlab.engine.generate import radii as make_radii, random_gas
 
@@ -64,6 +65,18 @@ def test_fit_of_eq28_returns_its_parameters():
     assert abs(noisy.d_F - d_F) < 3.0 * noisy.d_F_error < 0.1
     assert abs(noisy.xi - xi) < 3.0 * noisy.xi_error
     assert noisy.rms == pytest.approx(0.05, rel=0.3)
+
+
+def test_ell_is_given_back_from_the_amplitude_and_is_nan_where_d_f_near_2_takes_it_past_a_float():
+    phi, xi, ell = 0.3, 8.0, 0.5
+    for d_F in (1.2, 1.6, 1.99):
+        amplitude = phi * 2.0 * math.pi * ell ** 2 * scipy.special.gamma(d_F) * (xi / ell) ** d_F
+        assert ell_of_amplitude(amplitude, phi, d_F, xi) == pytest.approx(ell, rel=1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for d_F in (1.999_999_5, 2.0, 1.9999, 2.0001):  # (B / ...)^(1 / (2 - d_F)) past 1e308 or below 1e-308
+            assert math.isnan(ell_of_amplitude(np.float64(0.1), phi, d_F, xi))
+        assert math.isnan(ell_of_amplitude(0.0, phi, 1.6, xi))
 
 
 @pytest.mark.parametrize("box, centre", [((40.0, 40.0), (20.0, 20.0)), ((40.0, 30.0), (0.3, 29.9))])

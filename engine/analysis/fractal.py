@@ -304,6 +304,17 @@ def average_series_intensity(groups) -> tuple[np.ndarray, np.ndarray]:
 
 # ------------------------------------------------------------------------------------- the fit
 
+def ell_of_amplitude(amplitude: float, phi: float, d_F: float, xi: float) -> float:
+    """``ell = (B / (Phi 2 pi Gamma(d_F) xi^d_F))^(1 / (2 - d_F))``, or ``nan`` where it is not a
+    finite positive number: near ``d_F = 2`` the power takes any ratio other than 1 past the range of
+    a float (it was ``inf``, with numpy's overflow warning)."""
+    base = amplitude / (phi * 2.0 * math.pi * scipy.special.gamma(d_F) * xi ** d_F)
+    if abs(2.0 - d_F) <= 1e-6 or not base > 0.0:
+        return math.nan
+    exponent = math.log(base) / (2.0 - d_F)
+    return math.exp(exponent) if abs(exponent) < 700.0 else math.nan
+
+
 def structure_model(k, phi: float, d_F: float, xi: float, ell: float, constant: float) -> np.ndarray:
     """Eq. 28: ``Cst + Phi 2 pi ell² Gamma(d_F) (xi/ell)^d_F 2F1[(1+d_F)/2, d_F/2; 1; -xi² k²]``."""
     amplitude = phi * 2.0 * math.pi * ell ** 2 * scipy.special.gamma(d_F) * (xi / ell) ** d_F
@@ -390,8 +401,7 @@ def fit_structure(k, intensity, phi: float, diameter: float | None = None, k_ran
     variance = 2.0 * best.cost / max(1, kk.size - best.x.size)
     errors = np.sqrt(np.maximum(np.diag(np.linalg.pinv(best.jac.T @ best.jac)), 0.0) * variance)
     if ell is None:
-        base = amplitude / (phi * 2.0 * math.pi * scipy.special.gamma(d) * xi ** d)
-        ell = base ** (1.0 / (2.0 - d)) if abs(2.0 - d) > 1e-6 and base > 0.0 else math.nan
+        ell = ell_of_amplitude(amplitude, phi, d, xi)
     return StructureFit(d_F=float(d), d_F_error=float(errors[0]), xi=float(xi), xi_error=float(xi * errors[1]),
                         constant=float(constant), ell=float(ell), amplitude=float(amplitude),
                         fit_range=(k_min, k_max), points=int(kk.size), rms=float(math.sqrt(variance)))
