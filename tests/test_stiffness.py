@@ -389,3 +389,20 @@ def test_a_random_load_on_a_pair_of_disks_alone_is_none_and_excites_nothing():
     assert stiffness_report.values["load"] == status_report.values["load"] == "none"
     assert stiffness_report.values["null_modes"] == 4 and stiffness_report.values["collapse"] is False
     assert stiffness_report.texts["load"].startswith("none: no disk touches two others")
+
+
+def test_a_periodic_packing_whose_null_modes_are_its_translations_and_rattlers_draws_no_mechanism():
+    """The compression preset's packing: the null modes of k are the periodic cell's two translations
+    and the rattlers'. The lab drew the first null mode, a translation, as "the mechanism": the same
+    arrow on every disk."""
+    from granlab.engine.analysis.report import analyze
+    from granlab.engine.analysis.states import PackingState
+
+    box = make_preset("compression", preset_settings("compression"))
+    box.advance(20000)
+    report = analyze(PackingState.from_snapshot(box.sim.snapshot()), "stiffness")
+    values = report.values
+    assert values["rigid_body_modes"] == 2 and values["rattler_modes"] > 0
+    assert values["null_modes"] == values["rigid_body_modes"] + values["rattler_modes"]
+    assert report.result.modes.shape[1] == 2 and report.result.internal.shape[1] == 0
+    assert report.result.drawn_mode is None and report.figures == ()

@@ -127,16 +127,12 @@ def structure_curve(result: AnalysisResult) -> dict:
 
 
 def mechanism_arrows(result: AnalysisResult, head: float = 0.3) -> np.ndarray:
-    """(S, 2, 2) segments: an arrow on each disk along the translation of the mode that collapses
-    the packing, or else of the first null mode (none without one), the longest one disk
-    diameter long; each arrow is a shaft and two head strokes."""
-    mechanisms, state = result.report.result, result.state
-    mode = mechanisms.collapse_mode
+    """(S, 2, 2) segments: an arrow on each disk along the translation of the mode the stiffness
+    analysis draws (:attr:`granlab.engine.analysis.stiffness.Mechanisms.drawn_mode`; none without
+    one), the longest one disk diameter long; each arrow is a shaft and two head strokes."""
+    mode, state = result.report.result.drawn_mode, result.state
     if mode is None:
-        modes = mechanisms.modes
-        if modes is None or modes.shape[1] == 0:
-            return np.zeros((0, 2, 2))
-        mode = modes[:, 0]
+        return np.zeros((0, 2, 2))
     n = state.disks
     v = np.column_stack([mode[0:3 * n:3], mode[1:3 * n:3]])
     size = np.hypot(v[:, 0], v[:, 1])

@@ -422,7 +422,8 @@ class Mechanisms:
     then Eq. 39 has no solution and the packing collapses (``collapse_mode``, the excited motion).
     ``unstable`` counts directions with Q = vᵀkv < 0 (motion through an instability). ``modes``
     (n_dof, count - 3 x rattler disks) is a basis of the modes outside the rattlers (None if too
-    many; then the classification is None)."""
+    many; then the classification is None), ``internal`` a basis of those that are not motions of
+    the whole (None with ``modes``)."""
 
     count: int
     rigid_body: int | None
@@ -432,6 +433,18 @@ class Mechanisms:
     unstable: int
     modes: np.ndarray | None
     collapse_mode: np.ndarray | None
+    internal: np.ndarray | None
+
+    @property
+    def drawn_mode(self) -> np.ndarray | None:
+        """The mode the lab draws as arrows: the one that collapses the packing, or else the first
+        internal mechanism; None without one (a translation of a periodic cell's packing, drawn as
+        one arrow on every disk, was shown as its mechanism)."""
+        if self.collapse_mode is not None:
+            return self.collapse_mode
+        if self.internal is not None and self.internal.shape[1]:
+            return self.internal[:, 0]
+        return None
 
     def as_dict(self) -> dict:
         return {"null_modes": self.count, "rigid_body_modes": self.rigid_body, "rattler_modes": self.rattlers,
@@ -456,7 +469,7 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
     unstable = count_below(reduced, -tolerance * scale) if scale > 0 else 0
     zero, basis = null_space(reduced, tolerance, vectors=True, max_vectors=max_vectors)
     zero -= unstable
-    modes = collapse_mode = rigid = unexcited = collapse = None  # unknown without the modes
+    modes = collapse_mode = rigid = others = unexcited = collapse = None  # unknown without the modes
     if basis is not None:
         modes = np.zeros((net.dof, basis.shape[1]))
         modes[index] = basis
@@ -472,7 +485,7 @@ def mechanisms(net: Network, load_increment: np.ndarray | None = None, sliding: 
         if collapse:
             collapse_mode = modes @ (along / np.linalg.norm(along))
     return Mechanisms(zero + 3 * len(loose), rigid, 3 * len(loose), unexcited, collapse, unstable, modes,
-                      collapse_mode)
+                      collapse_mode, others)
 
 
 # ---------------------------------------------------------------------------------------- the analysis
@@ -543,15 +556,6 @@ def network_with_contacts(state) -> Network:
     return net
 
 
-def _drawn_mode(mech: Mechanisms) -> np.ndarray | None:
-    """The mode the lab draws as arrows: the one that collapses the packing, or else the first null mode."""
-    if mech.collapse_mode is not None:
-        return mech.collapse_mode
-    if mech.modes is not None and mech.modes.shape[1]:
-        return mech.modes[:, 0]
-    return None
-
-
 def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
     """k = cKScᵀ with the dynamics' statuses, its null modes and their classification for a load
     increment (quasi-rigidity Sec. III E); the result is the :class:`Mechanisms`."""
@@ -569,7 +573,7 @@ def run(state, clock: Clock, load: str, seed: int) -> AnalysisReport:
               "asymmetry": float(asymmetry), "load": kind, **mech.as_dict()}
     reasons = {} if mech.modes is not None else dict.fromkeys(("rigid_body_modes", "unexcited_mechanisms", "collapse"),
                                                               unclassified(MODE_VECTORS))
-    mode = _drawn_mode(mech)
+    mode = mech.drawn_mode
     moves_disks = mode is not None and bool(np.any(mode[:3 * net.disks].reshape(-1, 3)[:, :2] != 0.0))
     return AnalysisReport("stiffness", values, mech, reasons=reasons, texts={"load": LOAD_TEXTS.get(kind, kind)},
                           figures=("mechanism",) if moves_disks else ())
