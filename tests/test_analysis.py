@@ -73,6 +73,7 @@ def test_the_preparations_step_is_within_a_third_of_the_packings_own_stability_b
     # the engine's bound is twice this packing's own (on packings of 400-5600 disks, 1.78-1.86 times)
     assert 0.25 < sim.dt / own_bound < 0.4
 
+
 def chain_state(forces, periodic=True, walls=False):
     """Disks of radius 0.5 in a row along x (touching, one per unit length), joined by contacts
     carrying ``forces``; periodic: the row wraps around a cell of its length; walls: the row

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from granlab.engine.analysis.report import analyze
 from granlab.engine.analysis.rigidity import rigidity
+from granlab.engine.analysis.states import PackingState
 from granlab.engine.analysis.stiffness import Network, network, null_space, quadratic_form, stiffness_matrix
 from granlab.engine.params import ContactLaw
 from granlab.engine.protocols.prepare import gilabert_law, method1
@@ -373,10 +375,7 @@ def test_a_random_load_on_a_pair_of_disks_alone_is_none_and_excites_nothing():
     nothing to push. It was a 0/0 (NaN) increment, with warnings on the lab's console."""
     import warnings
 
-    from granlab.engine.analysis.report import analyze
-    from granlab.engine.analysis.states import PackingState
     from granlab.engine.analysis.stiffness import load_increment
-    from granlab.engine.protocols.presets import make_preset, preset_settings
 
     pair = make_preset("closed-path", preset_settings("closed-path"))
     pair.advance(3000)
@@ -395,9 +394,6 @@ def test_a_periodic_packing_whose_null_modes_are_its_translations_and_rattlers_d
     """The compression preset's packing: the null modes of k are the periodic cell's two translations
     and the rattlers'. The lab drew the first null mode, a translation, as "the mechanism": the same
     arrow on every disk."""
-    from granlab.engine.analysis.report import analyze
-    from granlab.engine.analysis.states import PackingState
-
     box = make_preset("compression", preset_settings("compression"))
     box.advance(20000)
     report = analyze(PackingState.from_snapshot(box.sim.snapshot()), "stiffness")
