@@ -174,14 +174,15 @@ def profile(side: int = 100, steps: int = 1000) -> dict:
                               sim.workspace)
         repeats = max(1, steps // 10)
         run = sim.run_options(sim.dt, 1)
-        contact_pass = _best_seconds(lambda: contacts.contact_forces(p, w, cell, ct, ws, sim._law_vector, run, False),
+        contact_forces = contacts.CONTACT_FORCES[sim.tangential_model_code]
+        contact_pass = _best_seconds(lambda: contact_forces(p, w, cell, ct, ws, sim._law_vector, run, False, None),
                                      repeats)
         direct = run._replace(gathered=False)
-        direct_pass = _best_seconds(
-            lambda: contacts.contact_forces(p, w, cell, ct, ws, sim._law_vector, direct, False), repeats)
+        direct_pass = _best_seconds(lambda: contact_forces(p, w, cell, ct, ws, sim._law_vector, direct, False, None),
+                                    repeats)
         particle_pass = _best_seconds(lambda: integrate.particle_pass(
             p, ws.force_buffer, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
-            ws.partial_gather, ws.gather), repeats)
+            ws.partial_gather, ws.gather, None), repeats)
         one_rebuild = rebuild_seconds(sim)
     finally:
         numba.set_num_threads(previous)

@@ -277,6 +277,24 @@ class Simulation:
     def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
                  cell: PeriodicCell | None = None, gravity=(0.0, 0.0), check_initial_overlap: bool = True):
+        self._arrange(particles, law, integration, walls, cell, gravity, check_initial_overlap)
+        self._advance(0.0, 1)
+        if check_initial_overlap:
+            self._check_initial_overlap()
+
+    @classmethod
+    def unstarted(cls, particles: ParticleState, law: ContactLaw = ContactLaw(),
+                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
+                  cell: PeriodicCell | None = None, gravity=(0.0, 0.0)) -> Simulation:
+        """The simulation's state and work arrays before its first force evaluation (which compiles
+        the time step on a first run): what :mod:`granlab.engine.compilation` compiles the step's
+        kernels for, one by one. It may not be run."""
+        sim = cls.__new__(cls)
+        sim._arrange(particles, law, integration, walls, cell, gravity, True)
+        return sim
+
+    def _arrange(self, particles, law, integration, walls, cell, gravity, check_initial_overlap) -> None:
+        """Check the arguments of :meth:`__init__` and make the state and work arrays."""
         if not isinstance(particles, ParticleState):
             raise ParameterError("particles", type(particles).__name__, "a ParticleState")
         self.particles = particles
@@ -314,9 +332,6 @@ class Simulation:
             flags=flags,
             energy=np.zeros(k_integrate.ENERGY_TALLY_SIZE), info=np.zeros(k_integrate.INFO_SIZE),
             row_columns=np.zeros((threads, k_gathered.COLUMNS * k_gathered.BLOCK)))
-        self._advance(0.0, 1)
-        if check_initial_overlap:
-            self._check_initial_overlap()
 
     # ------------------------------------------------------------------ set-up checks
     @staticmethod
@@ -424,7 +439,7 @@ class Simulation:
 
     def run_options(self, dt: float, n_steps: int) -> RunOptions:
         """What the kernels take for ``n_steps`` steps of ``dt`` from the current state."""
-        return RunOptions(self.normal_model_code, self.tangential_model_code, self.gravity, self._has_loads(), dt,
+        return RunOptions(self.normal_model_code, self.gravity, self._has_loads(), dt,
                           self._time_origin, self.step - self._step_origin, n_steps, self.skin,
                           self.integration.max_overlap, self.threads(), bool(self.gathered))
 
@@ -432,9 +447,10 @@ class Simulation:
         """One call of the kernel driver, growing the contact table until it fits."""
         while True:
             run = self.run_options(dt, n_steps)
-            done, code = k_integrate.advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
-                                             self.contacts.arrays(), self._spare.arrays(), self.workspace,
-                                             self._law_vector, run)
+            advance = k_integrate.ADVANCE[self.tangential_model_code]
+            done, code = advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
+                                 self.contacts.arrays(), self._spare.arrays(), self.workspace, self._law_vector, run,
+                                 None if run.n_chunks == 1 else True)
             if dt > 0:
                 self.step += done
             if code != k_integrate.CODE_OVERFLOW:

@@ -29,18 +29,20 @@ in row order; every other row is computed by the loop itself.
 import math
 from collections import namedtuple
 
-from numba import literal_unroll, literally, njit, prange, uint64
+import numpy as np
+from numba import literally, prange, uint64
 
 from ..state import STATUS_COHESIVE, STATUS_NONE, STATUS_STICK
 from . import tangential
 from .gathered import (BLOCK, C_FN, C_FT, C_FX, C_FY, C_GAP, C_HOT, C_NORMAL_DAMPING, C_OVERLAP_EXCESS, C_ROLL,
                        C_ROLLING_SLIP, C_ROLLING_WORK, C_SLIDING, C_SLIP, C_SPRING, C_STATUS, C_TANGENTIAL_WORK,
                        C_TORQUE_I, C_TORQUE_J, compute_block, gather_block)
-from .jit import KERNEL, PARALLEL
+from .cache import for_model
+from .jit import KERNEL, PARALLEL, njit
 from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, NORMAL_LINEAR, ZETA, ZETA_R, cohesion_force,
                    opened_dashpot_share, touching)
 from .pair import touching_laws
-from .tangential import CODES as TANGENTIAL_CODES, RowGeometry
+from .tangential import RowGeometry, model_key
 
 # per-chunk scalar tallies
 TALLY_DAMPING, TALLY_SLIDING, TALLY_ROLLING, TALLY_WALL_WORK = 0, 1, 2, 3
@@ -136,10 +138,10 @@ def separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening)
 
 
 @njit(**KERNEL)
-def contact_forces(p, w, cell, ct, ws, law, run, store):
+def contact_forces(p, w, cell, ct, ws, law, run, store, tangential_model, parallel):
     """Contact forces of every row of ``ct``, accumulated into ``run.n_chunks`` chunk buffers of
-    the workspace ``ws``, with the models, step and overlap limit of ``run``
-    (:class:`granlab.engine.state.RunOptions`).
+    the workspace ``ws``, with the normal model, step and overlap limit of ``run``
+    (:class:`granlab.engine.state.RunOptions`) and tangential model ``tangential_model`` (a code).
 
     ``ws.force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
     (the particle pass zeroes it); ``ws.wall_buffer (T, nw)`` and ``ws.tally_buffer (T, TALLY_SIZE)``
@@ -147,30 +149,45 @@ def contact_forces(p, w, cell, ct, ws, law, run, store):
     History (springs, anchors, status) is updated every call; the results ``normal_force``,
     ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run).
 
-    One chunk runs here, in the calling thread; more run in parallel. (A parallel launch
-    takes the GIL: a single-threaded run never does, so a busy Python thread cannot stall it.)
-    The loop is compiled once per tangential model (:data:`granlab.engine.kernels.tangential.CODES`), all
-    of them with this kernel: the model is chosen here, once per step, not per row.
+    With ``parallel`` None one chunk runs here, in the calling thread, and nothing parallel is
+    compiled; with ``parallel`` True the chunks run in parallel. (A parallel launch takes the GIL: a
+    single-threaded run never does, so a busy Python thread cannot stall it.) The loop is compiled
+    for the model it is called with, which it reads as a literal: nothing is decided per row, and a
+    command compiles the models it uses only.
     """
-    for code in literal_unroll(TANGENTIAL_CODES):
-        if run.tangential_model == code:
-            if run.n_chunks == 1:
-                contact_chunk(p, w, cell, ct, ws, law, run, code, store, 0)
-            else:
-                _contact_chunks_parallel(p, w, cell, ct, ws, law, run, code, store)
+    literally(tangential_model)
+    if parallel is None:
+        contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, np.int64(0))
+    else:
+        contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, store)
+
+
+def _contact_forces_for(tangential_model: int):
+    """:func:`contact_forces` with the code of a tangential model as a constant, for calls from Python
+    (as :data:`granlab.engine.kernels.integrate.ADVANCE`)."""
+
+    def contact_forces_model(p, w, cell, ct, ws, law, run, store, parallel):
+        contact_forces(p, w, cell, ct, ws, law, run, store, tangential_model, parallel)
+
+    contact_forces_model.__qualname__ = contact_forces_model.__name__ = f"contact_forces_{model_key(tangential_model)}"
+    return njit(**KERNEL)(for_model(contact_forces_model, tangential_model))
+
+
+CONTACT_FORCES = {code: _contact_forces_for(code) for code in tangential.MODELS}
+"""The contact pass alone by tangential model code (the benchmark's profile times it)."""
 
 
 @njit(**PARALLEL)
-def _contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, store):
+def contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, store):
     literally(tangential_model)
     for c in prange(run.n_chunks):
-        contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c)
+        contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, np.int64(c))
 
 
 @njit(**KERNEL)
 def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``, with the laws
-    of tangential model ``tangential_model`` (a compile-time code, ``run.tangential_model``)."""
+    of tangential model ``tangential_model`` (a compile-time code)."""
     literally(tangential_model)
     normal_model, dt, overlap_limit, n_chunks = run.normal_model, run.dt, run.max_overlap, run.n_chunks
     force_buffer, wall_buffer, tally_buffer = ws.force_buffer, ws.wall_buffer, ws.tally_buffer

@@ -2,10 +2,8 @@
 
 import math
 
-from numba import njit
-
 from ..state import STATUS_NONE, WALL_FORCE
-from .jit import JIT
+from .jit import JIT, njit
 from .laws import (D0, F0, KN, KR, KT, cohesion_potential, disk_arc, normal_elastic, normal_potential,
                    wall_arc)
 

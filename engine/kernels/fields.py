@@ -4,10 +4,8 @@ segment, its force and its kind."""
 
 import math
 
-from numba import njit
-
 from ..state import STATUS_COHESIVE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-from .jit import KERNEL
+from .jit import KERNEL, njit
 
 
 @njit(**KERNEL)

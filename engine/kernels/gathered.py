@@ -19,10 +19,10 @@ loop accumulates forces and tallies in the same order: the results are the same 
 
 import math
 
-from numba import njit, uint64
+from numba import uint64
 
 from . import tangential
-from .jit import KERNEL
+from .jit import KERNEL, njit
 from .laws import NORMAL_LINEAR, touching
 from .pair import touching_laws
 from .tangential import RowGeometry

@@ -4,9 +4,7 @@ labelled holes."""
 
 import math
 
-from numba import njit
-
-from .jit import JIT
+from .jit import JIT, njit
 
 
 @njit(**JIT)

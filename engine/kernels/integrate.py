@@ -15,18 +15,26 @@ Inside one call the second half kick of a step and the first half kick and drift
 next are one pass over the disks (leapfrog form). Between calls the state is always at a
 whole step, except when the contact table overflows: the call then returns in the middle
 of a step (``FLAG_PHASE`` = drifted) and the next call, with a larger table, resumes it.
+
+Numba types a constant argument as a literal and compiles the kernel it is passed to once for
+each value: flags, counts and chunk numbers that differ between call sites (or between the one-
+and the several-thread step, whose contact loop is then compiled once for both) are passed as
+``np.bool_`` and ``np.int64`` values.
 """
 
 import math
 
-from numba import njit, prange, uint64
+import numpy as np
+from numba import prange, uint64
 
 from ..state import CELL_NONE, CELL_STRAIN_RATE, CELL_STRESS, WALL_FIXED, WALL_FORCE
 from .contacts import (TALLY_DAMPING, TALLY_MAX_OVERLAP, TALLY_OPENING, TALLY_OVERLAPPING, TALLY_ROLLING,
-                       TALLY_SLIDING, TALLY_VXX, TALLY_WALL_WORK, contact_forces)
-from .jit import JIT, KERNEL, PARALLEL
+                       TALLY_SLIDING, TALLY_VXX, TALLY_WALL_WORK, contact_chunk, contact_chunks_parallel)
+from .cache import for_model
+from .jit import JIT, KERNEL, PARALLEL, njit
 from .laws import D0
 from .neighbours import build_table, copy_table
+from .tangential import MODELS, model_key
 
 CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP, CODE_REBUILD, CODE_TUNNEL = range(7)
 
@@ -53,7 +61,7 @@ INFO_SIZE = 6
 
 @njit(**KERNEL)
 def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
-                  scale_y, reference, partial, out):
+                  scale_y, reference, partial, out, parallel):
     """One pass over the disks: gather forces, kick, drift.
 
     - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque;
@@ -71,13 +79,14 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
 
     Fills ``out``: kinetic stress (x, y), prescribed and external work, the largest squared
     distance of a disk from its neighbour-list ``reference``, the number of non-finite disks,
-    the virial sums, and the largest drift of a disk in radii, with that disk. With ``n_chunks > 1`` the disks are split among threads, each
-    filling a row of ``partial (T, GATHER_SIZE)``.
+    the virial sums, and the largest drift of a disk in radii, with that disk. With ``parallel`` None
+    (:func:`advance`) the disks are one chunk, here; with ``parallel`` True they are split among ``n_chunks``
+    threads, each filling a row of ``partial (T, GATHER_SIZE)``.
     """
     n = p.position.shape[0]
-    if n_chunks == 1:
-        particle_range(p, force_buffer, 1, gravity, has_loads, gather, store, half, kicks, drift, scale_x, scale_y,
-                       reference, 0, n, out)
+    if parallel is None:
+        particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+                       scale_y, reference, np.int64(0), n, out)
         return
     _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                               scale_x, scale_y, reference, partial)
@@ -287,10 +296,9 @@ def cell_step(cell, virial, kinetic, half, kicks, drift, scale):
 
 
 @njit(**KERNEL)
-def contact_step(p, w, cell, ct, ws, law, run, store):
-    """Contact forces into the chunk buffers; walls' reactions, virial corrections, energy tallies."""
-    n_chunks = run.n_chunks
-    contact_forces(p, w, cell, ct, ws, law, run, store)
+def contact_totals(w, ws, n_chunks):
+    """After the contact pass: the walls' reactions, the virial corrections and the energy tallies,
+    summed over the chunk buffers."""
     for m in range(w.offset.shape[0]):
         total = 0.0
         for c in range(n_chunks):
@@ -358,12 +366,16 @@ def _needs_rebuild(w, cell, ws, skin):
 
 
 @njit(**KERNEL)
-def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks, drift, scale):
+def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks, drift, scale, parallel):
     """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress (keeping the
     previous ones for the barostat), the tallies the work of loads, of prescribed motions and
     of the cell's affine drift."""
-    particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
-                  scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather)
+    if parallel is None:  # particle_pass's one chunk, a call less deep to compile
+        particle_range(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale[0],
+                       scale[1], ws.reference, np.int64(0), p.position.shape[0], ws.gather)
+    else:
+        particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
+                      scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather, parallel)
     if gather:
         for a in range(2):
             ws.lagged_kinetic[a] = cell.kinetic[a]
@@ -377,10 +389,14 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks,
         ws.energy[E_EXTERNAL_WORK] += ws.gather[G_EXTERNAL]
 
 
-@njit(**JIT)
-def advance(p, w, cell, ct, spare, ws, law, run):
-    """Run up to ``run.n_steps`` velocity-Verlet steps (``run``: :class:`granlab.engine.state.RunOptions`);
-    returns ``(steps_done, code)``.
+@njit(**JIT, inline="always")
+def advance(p, w, cell, ct, spare, ws, law, run, tangential_model, parallel):
+    """Run up to ``run.n_steps`` velocity-Verlet steps (``run``: :class:`granlab.engine.state.RunOptions`)
+    with the laws of tangential model ``tangential_model`` (its code); returns ``(steps_done, code)``.
+
+    One machine code is compiled for each model and for each kind of ``parallel``, when first
+    used: ``None``, one thread (nothing parallel is compiled); ``True``, ``run.n_chunks`` threads.
+    Python calls it through :data:`ADVANCE`, into whose kernels it is inlined.
 
     Step ``k`` of this call ends at ``time_origin + (step_offset + k + 1) dt``. ``dt = 0`` with
     ``n_steps = 1`` only evaluates the forces of the current state. This outer loop rebuilds
@@ -392,20 +408,36 @@ def advance(p, w, cell, ct, spare, ws, law, run):
         return 0, CODE_OK
     scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
-        _start(p, w, cell, ws, run, scale)
+        _start(p, w, cell, ws, run, scale, parallel)
         if ws.gather[G_BAD] > 0:
             return 0, CODE_NAN
         if _tunnels(ws, run.max_overlap):
             return 0, CODE_TUNNEL
-    step = 0
+    step = np.int64(0)
     while True:
         if ws.flags[FLAG_REBUILD]:
             code = rebuild(p, w, cell, ct, spare, ws, law, run.skin)
             if code != CODE_OK:
                 return step, code
-        step, code = _steps(p, w, cell, ct, ws, law, run, step, scale)
+        step, code = _steps(p, w, cell, ct, ws, law, run, step, scale, tangential_model, parallel)
         if code != CODE_REBUILD:
             return step, code
+
+
+def _advance_for(tangential_model: int):
+    """:func:`advance` with the code of a tangential model as a constant. Numba compiles ``advance``
+    for the code as a literal; called from Python with the code as an argument, it would try the
+    code as a plain integer first and fail, at every call (some 20 ms)."""
+
+    def advance_model(p, w, cell, ct, spare, ws, law, run, parallel):
+        return advance(p, w, cell, ct, spare, ws, law, run, tangential_model, parallel)
+
+    advance_model.__qualname__ = advance_model.__name__ = f"advance_{model_key(tangential_model)}"
+    return njit(**JIT)(for_model(advance_model, tangential_model))
+
+
+ADVANCE = {code: _advance_for(code) for code in MODELS}
+"""The step driver by tangential model code: ``ADVANCE[code](p, w, cell, ct, spare, ws, law, run, parallel)``."""
 
 
 @njit(**KERNEL)
@@ -420,40 +452,45 @@ def _tunnels(ws, max_overlap):
 
 
 @njit(**KERNEL)
-def _start(p, w, cell, ws, run, scale):
+def _start(p, w, cell, ws, run, scale, parallel):
     """First half kick and drift of a call that starts on a whole step."""
     dt = run.dt
     half = 0.5 * dt
-    walls_step(w, run.time_origin + run.step_offset * dt, half, 1, dt)
-    cell_step(cell, ws.lagged_virial, ws.lagged_kinetic, half, 1, dt, scale)
+    kicks, no = np.int64(1), np.bool_(False)
+    walls_step(w, run.time_origin + run.step_offset * dt, half, kicks, dt)
+    cell_step(cell, ws.lagged_virial, ws.lagged_kinetic, half, kicks, dt, scale)
     for a in range(2):
         ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-    _pass(p, cell, ws, run.gravity, run.has_loads, run.n_chunks, False, False, half, 1, dt, scale)
+    _pass(p, cell, ws, run.gravity, run.has_loads, run.n_chunks, no, no, half, kicks, dt, scale, parallel)
     ws.flags[FLAG_PHASE] = PHASE_DRIFTED
     if _needs_rebuild(w, cell, ws, run.skin):
         ws.flags[FLAG_REBUILD] = 1
 
 
 @njit(**KERNEL)
-def _steps(p, w, cell, ct, ws, law, run, step, scale):
-    """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``)."""
+def _steps(p, w, cell, ct, ws, law, run, step, scale, tangential_model, parallel):
+    """Steps from a drifted state until the end, an error, or a rebuild is due (``CODE_REBUILD``).
+    The last step kicks once and does not drift: the state ends on a whole step."""
     gravity, has_loads = run.gravity, run.has_loads
     dt, time_origin, step_offset, n_steps = run.dt, run.time_origin, run.step_offset, run.n_steps
     skin, max_overlap, n_chunks = run.skin, run.max_overlap, run.n_chunks
     half = 0.5 * dt
+    gather = np.bool_(True)
     while True:
         last = step + 1 == n_steps
-        contact_step(p, w, cell, ct, ws, law, run, last)
-        t = time_origin + (step_offset + step + 1) * dt
-        if last:
-            walls_step(w, t, half, 1, 0.0)
-            cell_step(cell, cell.virial, cell.kinetic, half, 1, 0.0, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, True, half, 1, 0.0, scale)
-            ws.flags[FLAG_PHASE] = PHASE_ON_STEP
+        if parallel is None:  # the contact pass (contacts.contact_forces), a call less deep to compile
+            contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, last, np.int64(0))
         else:
-            walls_step(w, t, half, 2, dt)
-            cell_step(cell, cell.virial, cell.kinetic, half, 2, dt, scale)
-            _pass(p, cell, ws, gravity, has_loads, n_chunks, True, False, half, 2, dt, scale)
+            contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, last)
+        contact_totals(w, ws, n_chunks)
+        t = time_origin + (step_offset + step + 1) * dt
+        kicks = np.int64(1) if last else np.int64(2)
+        drift = 0.0 if last else dt
+        walls_step(w, t, half, kicks, drift)
+        cell_step(cell, cell.virial, cell.kinetic, half, kicks, drift, scale)
+        _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, last, half, kicks, drift, scale, parallel)
+        if last:
+            ws.flags[FLAG_PHASE] = PHASE_ON_STEP
         step += 1
         if ws.gather[G_BAD] > 0:
             return step, CODE_NAN

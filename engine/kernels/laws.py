@@ -11,11 +11,9 @@ The runtime parameters travel in one float64 vector indexed by ``KN, KT, ...``
 
 import math
 
-from numba import njit
-
 from ..params import NORMAL
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-from .jit import KERNEL
+from .jit import KERNEL, njit
 
 # layout of the law vector
 KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R, ZETA_R = range(10)

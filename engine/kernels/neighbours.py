@@ -10,10 +10,9 @@ It never writes past the capacity: it returns the number of rows it needs.
 import math
 
 import numpy as np
-from numba import njit
 
 from ..state import STATUS_NONE
-from .jit import JIT
+from .jit import JIT, njit
 from .laws import root_reduced_mass, touching
 
 MAX_CELLS_PER_PARTICLE = 4

@@ -3,9 +3,8 @@
 import math
 
 import numpy as np
-from numba import njit
 
-from .jit import JIT
+from .jit import JIT, njit
 
 
 @njit(**JIT)

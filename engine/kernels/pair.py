@@ -8,10 +8,8 @@ would not inline it (too large), and the gathered loop would neither vectorise n
 (18 -> 44 ns a row); the direct loop took 38 ns a row instead of 24.
 """
 
-from numba import njit
-
 from . import tangential
-from .jit import KERNEL
+from .jit import KERNEL, njit
 from .laws import cohesion_force, dashpot_share, normal_elastic, rolling_step
 
 

@@ -40,7 +40,12 @@ MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for mod
 _WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGENTIAL.values()}
 _READS_DIRECTION = {model.code: model.reads_direction for model in TANGENTIAL.values()}
 CODES = tuple(sorted(MODELS))
-"""The codes the contact loop is compiled for, one loop each."""
+"""The models' codes: the contact loop is compiled for each, when a run first uses it."""
+
+
+def model_key(code: int) -> str:
+    """The name of model ``code``'s module (an identifier)."""
+    return MODELS[code].__name__.rpartition(".")[2]
 
 
 def _model(code):

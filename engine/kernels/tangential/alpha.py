@@ -3,9 +3,7 @@ times (ratcheting Eqs. 23–25), so the spring measures the rolling-free displac
 points and a closed path leaves no residue; the force on the centres carries ``alpha`` too (Eq. 30).
 The spring is integrated and limited as Cundall–Strack's."""
 
-from numba import njit
-
-from ..jit import KERNEL
+from ..jit import KERNEL, njit
 from .cundall_strack import limit, trial_spring
 
 __all__ = ["spring_rate", "trial_spring", "limit", "centre_factor"]

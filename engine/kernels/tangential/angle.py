@@ -5,9 +5,7 @@ force on the centres are the α-corrected ones, its Coulomb limit Cundall–Stra
 
 import math
 
-from numba import njit
-
-from ..jit import KERNEL
+from ..jit import KERNEL, njit
 from ..laws import disk_arc, wall_arc
 from .alpha import centre_factor, spring_rate
 from .cundall_strack import limit

@@ -1,9 +1,7 @@
 """Cundall–Strack: the spring integrates the relative tangential velocity of the contact points
 (ratcheting Eqs. 7–11); a closed path leaves it the residue of Eq. 17."""
 
-from numba import njit
-
-from ..jit import KERNEL
+from ..jit import KERNEL, njit
 from ..laws import coulomb
 
 

@@ -18,10 +18,8 @@ is ``Gamma_t``: equal for one pair of masses (a collision), not across a polydis
 
 import math
 
-from numba import njit
-
 from ...state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
-from ..jit import KERNEL
+from ..jit import KERNEL, njit
 
 
 @njit(**KERNEL)
