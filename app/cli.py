@@ -10,7 +10,7 @@ import time
 
 from granlab.engine import cli as engine_cli
 from granlab.engine.errors import GranLabError
-from granlab.engine.io.export import EXPORT_FORMATS, export_run, print_summary as print_export_summary
+from granlab.engine.io.export import EXPORT_FORMATS, print_summary as print_export_summary
 
 
 def build_parser():
@@ -100,6 +100,8 @@ def _print_render(result: dict) -> None:
 
 
 def _export(args) -> dict:
+    from granlab.engine.io.export import export_run
+
     return export_run(args.runfile, args.format, args.out, args.frames, args.force,
                       progress=_FrameProgress("exporting"))
 

@@ -131,6 +131,8 @@ class NotebookLab:
             self._failure = error
             self._ready.set()
             return
+        if not self._lab.compiles:  # a second or two: the cell then shows a lab that answers
+            self._lab.wait_ready(60)
         self._ready.set()
         self._lab.server.io_loop.start()
 
@@ -143,7 +145,9 @@ class NotebookLab:
         return self._lab.status()
 
     def submit(self, command: str, **payload) -> None:
-        """Send the engine a command as a control of the page does (``apply`` with ``changes``, ``play``...)."""
+        """Send the engine a command as a control of the page does (``apply`` with ``changes``, ``play``...),
+        once the engine has started (a first run compiles its kernels first)."""
+        self._lab.wait_ready()
         self._lab.engine.submit(command, **payload)
 
     def stop(self) -> None:

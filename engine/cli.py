@@ -29,13 +29,9 @@ import time
 from importlib.metadata import version
 from pathlib import Path
 
-import numba
-
 from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed
-from .io.jsonsafe import jsonable
-from .params import TANGENTIAL, TANGENTIAL_MODELS
-from .protocols.prepare import CELL_MASS_READINGS, GILABERT_DT_SAFETY
+from .params import CELL_MASS_READINGS, GILABERT_DT_SAFETY, TANGENTIAL, TANGENTIAL_MODELS
 from .reproduce import REPRODUCTIONS, ROLLING_CASES
 
 
@@ -60,10 +56,14 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     file, and an existing ``out`` is written over only with ``force``. ``progress(done, total,
     sim)`` is called about four times a second of wall time (the steps run in slices that long;
     a run split so continues bit for bit), not after the last slice: the result follows."""
+    import numba
+
+    from .compilation import compile_sets, step_sets
     from .io import h5md
     from .io.outputs import check_output
     from .io.scene import load_scene, parse_scene
     from .params import positive
+    from .simulation import PARALLEL_MIN_DISKS
 
     positive("--checkpoint-seconds", checkpoint_seconds, allow_inf=True)
     start = time.perf_counter()
@@ -80,6 +80,8 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         scene = load_scene(name)
         if scene.threads:
             numba.set_num_threads(scene.threads)
+        threaded = numba.get_num_threads() > 1 and scene.particles.count >= PARALLEL_MIN_DISKS
+        compile_sets(step_sets([scene.law.tangential_model], threaded) + ["state"])
         sim = scene.build()
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
@@ -142,15 +144,16 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
 
 
 def _run_progress():
-    """A line on standard error once a second, from the first second on (a short run prints none):
+    """A line on standard error once a second of stepping, from the first second on (a short run
+    prints none; the clock starts with the first steps, after the imports and the kernels' loading):
     ``running: step 12000 of 80000 (15 %), t = 3.2, 4 s``."""
-    start = time.monotonic()
-    shown = [start]
+    clock = {}
 
     def report(done: int, total: int, sim) -> None:
         now = time.monotonic()
-        if now - shown[0] >= 1.0:
-            shown[0] = now
+        start = clock.setdefault("start", now)
+        if now - clock.setdefault("shown", now) >= 1.0:
+            clock["shown"] = now
             print(f"running: step {done} of {total} ({100 * done / total:.0f} %), t = {sim.time:.4g}, "
                   f"{now - start:.0f} s", file=sys.stderr, flush=True)
     return report
@@ -176,10 +179,12 @@ def _print_run(result: dict) -> None:
 
 
 def _experiment(args) -> dict:
+    from .compilation import compile_sets, step_sets
     from .protocols.teaching import EXPERIMENTS
 
     options = {key: getattr(args, key) for key in ("zeta", "mu", "dt") if getattr(args, key) is not None}
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
+    compile_sets(step_sets(models))
     results = [dict(EXPERIMENTS[args.name](model=model, **options).as_dict(), experiment=args.name)
                for model in models]
     return {"experiment": args.name, "models": results} if args.model == "all" else results[0]
@@ -212,6 +217,8 @@ def _print_one_experiment(result: dict) -> None:
 
 
 def _bench(args) -> dict:
+    import numba
+
     from . import bench
 
     if args.beside_engine and not args.analysis:
@@ -227,6 +234,9 @@ def _bench(args) -> dict:
         return bench.scaling(steps=steps)
     if args.profile:
         return bench.profile(args.side, args.steps or 1000)
+    from .compilation import compile_sets, step_sets
+
+    compile_sets(step_sets([args.model]) + step_sets([args.model], threads=numba.config.NUMBA_NUM_THREADS > 1))
     return bench.run(steps, args.side, args.model)
 
 
@@ -541,6 +551,8 @@ def _print_info(result: dict) -> None:
         e = result["energy_last"]
         print(f"  last energies: kinetic {e['kinetic']:.6g}, stored {e['stored']:.6g}, balance {e['balance']:.6g}")
     if result.get("protocol"):
+        from .io.jsonsafe import jsonable
+
         print(f"  protocol: {json.dumps(jsonable(result['protocol']))}")
 
 
@@ -616,7 +628,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {version('granlab')}")
     commands = parser.add_subparsers(dest="command", required=True)
     for add in (_add_run, _add_experiment, _add_bench, _add_prepare, _add_study, _add_reproduce, _add_analyze,
-                _add_quasistatic, _add_info):
+                _add_quasistatic, _add_info, _add_compile):
         add(commands)
     return parser
 
@@ -935,6 +947,42 @@ def _add_info(commands) -> None:
     info.set_defaults(handler=_info, printer=_print_info)
 
 
+def _add_compile(commands) -> None:
+    from .compilation import KERNEL_SETS
+
+    compile_ = commands.add_parser("compile", help="compile every kernel now (a first run then starts at once): the "
+                                                   "night before a class, or after an upgrade")
+    compile_.add_argument("--only", nargs="+", choices=tuple(KERNEL_SETS), metavar="SET",
+                          help="these kernel sets only: " + ", ".join(KERNEL_SETS))
+    compile_.add_argument("--workers", type=_positive_int, help="processes compiling side by side (default: one a "
+                                                                "core)")
+    compile_.add_argument("--json", action="store_true", help="print one JSON object")
+    compile_.set_defaults(handler=_compile, printer=_print_compile)
+
+
+def _compile(args) -> dict:
+    import numba
+
+    from .compilation import KERNEL_SETS, compile_sets
+    from .kernels.cache import cache_root
+
+    start = time.perf_counter()
+    names = args.only or tuple(KERNEL_SETS)
+    if numba.config.NUMBA_NUM_THREADS < 2:  # one core: nothing runs the several-thread code
+        names = [name for name in names if not name.endswith("-threads")]
+    compiled = compile_sets(names, workers=args.workers)
+    return {"compiled": compiled, "already": [name for name in names if name not in compiled],
+            "seconds": time.perf_counter() - start, "cache": str(cache_root())}
+
+
+def _print_compile(result: dict) -> None:
+    if result["compiled"]:
+        print(f"compiled {len(result['compiled'])} kernel sets in {result['seconds']:.0f} s "
+              f"({len(result['already'])} were compiled before), kept in {result['cache']}")
+    else:
+        print(f"every kernel set was compiled before ({len(result['already'])}), kept in {result['cache']}")
+
+
 def _prepare_with_defaults(args) -> dict:
     defaults = {"compress": (16, 1.0), "1": (200, 1e-2), "2": (200, 1e-2)}[args.method]
     if args.particles is None:
@@ -950,8 +998,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def run_args(args) -> int:
     """Run a parsed command: print its result (or one JSON object); errors exit with status 2."""
+    from .compilation import announced
+
     try:
-        result = args.handler(args)
+        with announced():
+            result = args.handler(args)
     except WriteFailed as error:
         print(f"granlab {args.command}: error: {error}", file=sys.stderr, flush=True)
         sys.stdout.flush()
@@ -967,6 +1018,8 @@ def run_args(args) -> int:
             raise
         print(f"granlab {args.command}: error: {h5md.damaged(source, error)}", file=sys.stderr)
         return 2
+    from .io.jsonsafe import jsonable
+
     try:
         if args.json:
             print(json.dumps(jsonable(result)))

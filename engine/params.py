@@ -78,6 +78,35 @@ NORMAL_MODELS = tuple(NORMAL)
 WALL_MODES = ("fixed", "velocity", "force")
 CELL_CONTROLS = ("fixed", "stress", "strain-rate")
 
+GILABERT_DT_SAFETY = 0.6
+"""The time step of Gilabert's preparations (methods 1 and 2), as a fraction of the engine's
+stability bound (:func:`granlab.engine.simulation.stability_bound`). That bound assumes 6 contacts on
+every disk; on equilibrated packings of 150 to 5600 disks the highest frequency of the contact
+network is 1.78-2.0 times below it, so 0.6 is about a third of the packings' own bound. Against
+0.3 (27 Nov 2026): method 1 at 200 disks, 8 cases x 2 seeds, the same Phi and z to 4 digits in 3
+of the 8 cohesive pairs and within the seeds' spread in the others; method 2 at 150 disks, 10
+seeds, Phi and z within 1.3 standard errors (docs/gilabert.md). A sample takes half the time."""
+
+CELL_MASS_READINGS = ("mass", "per-length")
+"""Two readings of Gilabert's generalized mass ``M`` (Eq. 3, Sec. II A): ``mass``, 3/10 of the grain
+mass, a mass as Eq. 3 needs in 2D (its stresses are forces per length, its strain has no
+dimension); ``per-length``, 3/10 of the grain mass over the cell size ``L`` (the paper's words,
+which it calls "dimensionally correct": so they are for stresses per area, in 3D), in units of the
+largest diameter. The first reproduces Table III, the second compacts faster and ends looser and
+less coordinated (docs/gilabert.md, "The cohesive z gap")."""
+
+
+def check_cell_mass_reading(reading: str) -> str:
+    """``reading`` if it is one of :data:`CELL_MASS_READINGS`; a ParameterError naming them if not."""
+    if reading not in CELL_MASS_READINGS:
+        raise ParameterError("cell_mass", reading, "one of " + ", ".join(CELL_MASS_READINGS))
+    return reading
+
+
+STUDY_LIMITS = {"particles": 20000, "samples": 10000, "cycles": 100000, "period": (0.1, 1e4), "workers": 256}
+"""The largest study run here (the lab's largest box; a count of samples, cycles and workers, a
+period in τ whose work a cluster finishes in days, not years), checked before any work starts."""
+
 
 def _number(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):

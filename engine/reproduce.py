@@ -36,17 +36,8 @@ import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numba
-import numpy as np
-
-from .analysis.fractal import FitError, average_series_intensity, fit_structure, small_scale_amplitude
-from .analysis.packing import packing_stats
 from .errors import GranLabError, ParameterError
-from .io.jsonsafe import jsonable
-from .observables import coordination as observed_coordination
-from .params import fraction, nonnegative, whole
-from .protocols.prepare import GILABERT_DT_SAFETY, check_cell_mass_reading
-from .studies import STUDY_LIMITS
+from .params import GILABERT_DT_SAFETY, STUDY_LIMITS, check_cell_mass_reading, fraction, nonnegative, whole
 
 PHI_I = 0.36
 """Solid fraction of the initial gas (the I-state; Tables II-V use ``Phi_I = 0.3631 ± 0.0006``)."""
@@ -155,6 +146,8 @@ def published(name: str, case: Case) -> dict[str, Published]:
 
 def _published_k0(phi: Published, xi: Published, d_F: Published) -> Published:
     """``k0 = Phi (xi/a)^(2 - d_F)`` of published values, its error propagated from theirs (independent)."""
+    from .analysis.fractal import small_scale_amplitude
+
     k0 = small_scale_amplitude(phi.value, xi.value, d_F.value)
     relative = math.hypot(phi.error / phi.value, (2.0 - d_F.value) * xi.error / xi.value,
                           math.log(xi.value) * d_F.error)
@@ -216,6 +209,8 @@ class Reproduction:
     dt_safety: float = GILABERT_DT_SAFETY
 
     def __post_init__(self):
+        import numba
+
         if self.name not in REPRODUCTIONS:
             raise ParameterError("table", self.name, "one of " + ", ".join(REPRODUCTIONS))
         for key, least, most in (("particles", 2, STUDY_LIMITS["particles"]), ("samples", 1, STUDY_LIMITS["samples"]),
@@ -238,6 +233,9 @@ class Reproduction:
 
 def coordination(snapshot, cohesive: bool, force_scale: float) -> float:
     """Gilabert's ``z`` (see the module docstring)."""
+    from .analysis.packing import packing_stats
+    from .observables import coordination as observed_coordination
+
     if not cohesive:
         return packing_stats(snapshot, force_scale).z
     c = snapshot.contacts
@@ -248,7 +246,7 @@ def _fractal(snapshot, prefix: str) -> dict:
     """The fractal analysis of ``snapshot`` under the default conventions (4-connected holes, the periodic
     transform) and the other ones (8-connected holes: ``hole_radius_w8``; a Hann window: I(k) and its
     fit under ``..._hann``), for the docs' comparison of conventions (the paper names none)."""
-    from .analysis.fractal import fractal_analysis
+    from .analysis.fractal import fractal_analysis, small_scale_amplitude
 
     values = {}
     for tag, connectivity, transform in (("", 4, "periodic"), ("_hann", 8, "hann")):
@@ -277,6 +275,9 @@ def _fractal(snapshot, prefix: str) -> dict:
 def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
     """Prepare and measure one sample on ``reproduction.threads_per_sample`` threads; failures are
     returned, not raised."""
+    import numba
+
+    from .analysis.packing import packing_stats
     from .protocols.equilibrium import equilibrium
     from .protocols.prepare import gilabert_law, method1, method2
 
@@ -323,6 +324,8 @@ def gilabert_sample(reproduction: Reproduction, case: Case, seed: int) -> dict:
 def summarize(reproduction: Reproduction, rows: list[dict]) -> dict:
     """Per case and quantity: mean, standard deviation and standard error over the samples that
     gave it, beside the published value."""
+    import numpy as np
+
     cases = []
     for case in reproduction.cases:
         done = sorted((r for r in rows if r["case"] == case.label and r["error"] is None), key=lambda r: r["seed"])
@@ -355,6 +358,10 @@ def averaged_fit(rows: list[dict], prefix: str) -> dict:
     Rows of a series (:func:`summarize_series`) carry their ``particles``: each size is averaged
     on its own bins, the larger boxes alone below the smaller ones' (see
     :func:`granlab.engine.analysis.fractal.average_series_intensity`)."""
+    import numpy as np
+
+    from .analysis.fractal import FitError, average_series_intensity, fit_structure, small_scale_amplitude
+
     have = [r for r in rows if r.get(f"k{prefix}")]
     fit = {"samples": len(have), "d_F": None, "d_F_error": None, "xi": None, "xi_error": None, "k0": None,
            "error": None}
@@ -419,6 +426,8 @@ SAMPLES_FOLDER = "samples"
 
 def _write_json(path: Path, data) -> None:
     """Write whole or not at all: an interruption leaves the previous file or none."""
+    from .io.jsonsafe import jsonable
+
     partial = path.with_name(path.name + ".partial")
     partial.write_text(json.dumps(jsonable(data), indent=1))
     os.replace(partial, path)
@@ -477,10 +486,17 @@ def _sample_writer(folder, reproduction: Reproduction):
     return write
 
 
-def warm_up() -> None:
-    """Compile (or load from the cache) every kernel a sample needs, before workers start."""
+def warm_up(report, threads: int = 1) -> None:
+    """Compile (or load from the cache) every kernel a sample on ``threads`` threads needs, before the
+    workers start: the time step and the analyses' kernels side by side in processes of their own,
+    then a sample of 6 disks; ``report(text)`` says how far the compile is."""
+    import io
+
+    from .compilation import compile_sets, describe, step_sets
     from .protocols.prepare import gilabert_law, method1
 
+    compile_sets([*step_sets(["cundall-strack"], threads > 1), "state", "packing", "fractal"], stream=io.StringIO(),
+                 on_change=lambda state: report(describe(state)))
     law = gilabert_law(friction=0.5, cohesion=True, rolling=True, pressure=P_STAR)
     _fractal(method1(6, PHI_I, P_STAR, law, max_time=1.0).sim.snapshot(), "")
 
@@ -504,7 +520,8 @@ def run_reproduction(reproduction: Reproduction, scheduler: str | None = None, w
     keys = [f"{reproduction.name}-{sample_key(case, seed)}" for _, case, seed in tasks]
     if workers is None and scheduler is None:
         workers = max(1, (os.cpu_count() or 1) // reproduction.threads_per_sample)
-    outcomes = run_tasks(gilabert_sample, tasks, keys, scheduler=scheduler, workers=workers, warm_up=warm_up,
+    outcomes = run_tasks(gilabert_sample, tasks, keys, scheduler=scheduler, workers=workers,
+                         warm_up=lambda report: warm_up(report, reproduction.threads_per_sample),
                          progress=progress, on_result=None if folder is None else _sample_writer(folder, reproduction)
                          ) if tasks else []
     for (_, case, seed), outcome in zip(tasks, outcomes):

@@ -10,6 +10,7 @@ its scheduler address.
 from __future__ import annotations
 
 import contextlib
+import io
 import math
 import os
 import signal
@@ -28,15 +29,12 @@ from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
 from .observables import columns, touching
-from .params import TANGENTIAL_MODELS, finite, nonnegative, positive, whole
+from .params import STUDY_LIMITS, TANGENTIAL_MODELS, finite, nonnegative, positive, whole
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
 
 
-STUDY_LIMITS = {"particles": 20000, "samples": 10000, "cycles": 100000, "period": (0.1, 1e4), "workers": 256}
-"""The largest study run here (the lab's largest box; a count of samples, cycles and workers, a
-period in τ whose work a cluster finishes in days, not years), checked before any work starts."""
 
 
 @dataclass(frozen=True)
@@ -257,10 +255,16 @@ def summarize(study: RatchetStudy, results: list[dict]) -> dict:
             "failed": failed}
 
 
-def warm_up() -> None:
-    """Compile (or load from the cache) every kernel a sample needs, before workers start."""
-    ratchet_sample(RatchetStudy(particles=4, samples=1, cycles=3, reference_cycle=0, period=0.5,
-                                models=TANGENTIAL_MODELS), 0, None)
+def warm_up(models, report) -> None:
+    """Compile (or load from the cache) every kernel a sample with ``models`` needs, before the
+    workers start: the time steps side by side in processes of their own, then a sample of 4 disks;
+    ``report(text)`` says how far the compile is."""
+    from .compilation import compile_sets, describe, step_sets
+
+    compile_sets([*step_sets(models), "state", "packing"], stream=io.StringIO(),
+                 on_change=lambda state: report(describe(state)))
+    ratchet_sample(RatchetStudy(particles=4, samples=1, cycles=3, reference_cycle=0, period=0.5, models=models),
+                   0, None)
 
 
 def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir: str | None = None,
@@ -277,7 +281,7 @@ def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir
     start = time.perf_counter()
     outcomes = run_tasks(ratchet_sample, [(study, seed, out_dir, force) for seed in seeds],
                          [f"ratchet-sample-{seed}" for seed in seeds], scheduler=scheduler, workers=workers,
-                         warm_up=warm_up, progress=progress)
+                         warm_up=lambda report: warm_up(study.models, report), progress=progress)
     results = []
     for seed, outcome in zip(seeds, outcomes):
         if isinstance(outcome, Exception):  # a lost worker: report, go on
@@ -311,7 +315,8 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
     exception raised by a task whose worker was lost (the others go on). ``on_result(key, result)``
     is called in this process as each task finishes (not for a lost worker's).
 
-    Without ``scheduler``, ``warm_up()`` compiles the kernels first and a local cluster starts with
+    Without ``scheduler``, ``warm_up(report)`` compiles the kernels first (``report(text)``: how far it
+    is, the phase ``progress`` shows) and a local cluster starts with
     ``workers`` (default: all cores) single-threaded worker processes; ``scheduler`` is the address
     of an existing one. ``progress(done, total, phase)`` is called as tasks finish and once a
     second meanwhile (``phase``: what is going on), so that minutes of compiling or of long samples
@@ -336,7 +341,7 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
                 raise GranLabError(f"cannot reach the Dask scheduler at {scheduler!r}: {error}") from error
         else:
             if warm_up is not None:
-                warm_up()
+                warm_up(lambda phase: state.update(phase=phase))
             state["phase"] = "starting the workers"
             with _workers_leave_interrupts_to_us():
                 cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,

@@ -8,7 +8,20 @@ import numpy as np
 import pytest
 
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from granlab.engine.compilation import KERNEL_SETS, compile_sets
 from granlab.engine.generate import radii, random_gas
+
+SUITE_KERNEL_SETS = [name for name in KERNEL_SETS if not name.endswith("-threads")] + \
+    ["step-pieces-threads", "step-cundall-strack-threads"]
+"""What the suite runs: every set on one thread, and Cundall-Strack's step on several (the other
+models' several-thread steps compile in the tests that use them)."""
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """The kernels the suite runs, compiled at its start side by side (a worker a core) into the kernel
+    cache that every test, every subprocess and the wheel's virtual environment then load them from."""
+    compile_sets(SUITE_KERNEL_SETS)
 
 
 def periodic_gas(count=120, length=20.0, seed=1, speed=1.0, law=None, dt_safety=0.1, skin=None, radius_range=(0.4, 0.6)):

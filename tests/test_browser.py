@@ -722,3 +722,41 @@ def test_the_lab_of_a_notebook_cell_runs_in_its_frame(page, tmp_path):
         notebook.shutdown()
         live.stop()
     assert not live._thread.is_alive()
+
+
+def test_a_first_start_serves_at_once_shows_the_compile_on_the_page_then_the_preset(page, tmp_path):
+    """A lab whose kernels are not compiled (here: the step's neighbour search and first kick, taken
+    out of a copy of the suite's kernel cache) prints its address at once; a page opened then shows
+    how far the compile is, and reloads into the dashboard with the preset running once it is done."""
+    import re
+    import subprocess
+    import sys
+
+    from granlab.engine.kernels.cache import cache_root
+
+    cache = tmp_path / "cache"
+    shutil.copytree(cache_root(), cache, ignore=shutil.ignore_patterns("integrate.rebuild-*", "integrate._start-*"))
+    process = subprocess.Popen([sys.executable, "-m", "granlab.app.cli", "serve", "--port", "0", "--data-dir",
+                                str(tmp_path / "data")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                               env={**os.environ, "GRANLAB_CACHE_DIR": str(cache)})
+    try:
+        started = time.time()
+        lines = []
+        while not any("GranLab lab at" in line for line in lines):
+            lines.append(process.stdout.readline())
+            assert time.time() - started < 60, lines
+        url = re.search(r"GranLab lab at (http://\S+)", lines[-1]).group(1)
+        assert "compiles the simulation's kernels" in process.stdout.readline()
+        page.goto(url)
+        message = page.locator(".starting-text")
+        expect(message).to_contain_text("Compiling the simulation's kernels, first run only (later starts take "
+                                         "seconds): 1 of 1 (the neighbour search and the first kick)", timeout=60000)
+        expect(message).to_have_text(re.compile(r".*first kick\), \d+ s\s*$"))  # and the seconds so far
+        assert page.locator(".starting-progress progress").get_attribute("max") == "1"
+        assert read_status(url)["state"] == "compiling"
+        page.wait_for_selector(".preset-select select", timeout=120000)  # reloaded into the dashboard
+        assert page.locator(".starting-text").count() == 0
+        wait_status({"url": url}, lambda s: s["state"] == "running" and s["step"] > 0)
+    finally:
+        process.terminate()
+        process.wait(timeout=30)

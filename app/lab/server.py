@@ -47,15 +47,18 @@ from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST, _env
 from websockets.http11 import Request
 
+from granlab.engine.compilation import announced, compile_sets, missing, step_sets
 from granlab.engine.errors import GranLabError
 from granlab.engine.io.jsonsafe import jsonable
 from granlab.engine.io.outputs import check_output
-from granlab.engine.protocols.presets import PRESETS
+from granlab.engine.params import TANGENTIAL
+from granlab.engine.protocols.presets import PRESETS, preset_settings
 
 from . import lessons
 from .dashboard import Dashboard
 from .engine_thread import HISTORY_MIB, LabEngine
 from .scene import SceneView
+from .starting import starting_page
 from .stream import StreamSocket, ViewerStream
 
 VIEWER_SCENE = Path(__file__).resolve().parents[2] / "static" / "viewer" / "scene.html"
@@ -169,20 +172,39 @@ class ViewerSceneHandler(PageHandler):
         self.write(VIEWER_SCENE.read_bytes())
 
 
+def lab_kernel_sets(settings) -> tuple[list[str], list[str]]:
+    """The kernel sets a preset with ``settings`` needs to start, and those the lab's other choices need
+    (the other tangential models), compiled after it started."""
+    first = [*step_sets([settings.tangential_model]), "packing", "state", "frames"]
+    return first, [f"step-{model}" for model in TANGENTIAL if f"step-{model}" not in first]
+
+
 class Lab:
-    """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server."""
+    """Everything one ``granlab serve`` runs: engine, scene, scene thread and panel server.
+
+    The server answers at once; the engine starts once the kernels its first preset needs are
+    compiled (on a first run, in worker processes: meanwhile every page shows how far), and the
+    kernels of the lab's other choices are compiled next, in a worker process beside it."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
                  preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False,
                  history_mib: float = HISTORY_MIB, **changes):
         self.host = host
         self.roles = {secrets.token_urlsafe(16): role for role in ("presenter", "viewer")} if tokens else {}
-        self.engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib, **changes)
+        settings = preset_settings(preset, **changes)  # a bad setting is refused before anything starts
+        kernel_sets = lab_kernel_sets(settings)
+        self.compiles = bool(missing(kernel_sets[0]))
+        """Whether the engine's start compiles kernels (a first run): else it starts in a second or two."""
+        self.engine: LabEngine | None = None
+        self.starting = {"state": "compiling" if self.compiles else "starting", "done": 0, "total": 0,
+                         "current": "", "seconds": 0.0, "error": ""}
+        self._ready = threading.Event()
+        self._starter = threading.Thread(target=self._start_engine, name="granlab-starter", daemon=True,
+                                         args=(data_dir, preset, history_mib, changes, kernel_sets))
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own address: the page embeds it
             self.scene = SceneView(host=host, port=0, admit=self._admit_scene,
                                    may_pick=self._presenter_path if tokens else None)
-        self.scene.on_pick(lambda index: self.engine.submit("watch_disk", index=index))
-        self.engine.scene_fps = self.scene.fps
+        self.scene.on_pick(lambda index: self.engine and self.engine.submit("watch_disk", index=index))
         self.scene_interval = 1.0 / scene_rate
         self.stream = ViewerStream()
         self._stop = threading.Event()
@@ -208,7 +230,31 @@ class Lab:
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
                                **auth)
 
+    def _start_engine(self, data_dir, preset: str, history_mib: float, changes: dict, kernel_sets) -> None:
+        first, later = kernel_sets
+        try:
+            compile_sets(first, on_change=self.starting.update)
+            with announced():  # what the preset uses beyond the sets, if anything
+                engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib, **changes)
+        except Exception as error:  # noqa: BLE001 (shown on every page and in the terminal)
+            self.starting.update(state="failed", error=f"{type(error).__name__}: {error}")
+            print(f"granlab serve: error: the engine did not start: {self.starting['error']}", file=sys.stderr,
+                  flush=True)
+            return
+        engine.scene_fps = self.scene.fps
+        engine.start()
+        self.engine = engine
+        self._ready.set()
+        with contextlib.suppress(Exception):  # a choice not compiled here compiles when chosen
+            compile_sets(later, workers=1, nice=10, load=False, background=True)
+
+    def wait_ready(self, timeout: float | None = None) -> bool:
+        """Whether the engine runs, waiting up to ``timeout`` seconds for it."""
+        return self._ready.wait(timeout)
+
     def status(self) -> dict:
+        if self.engine is None:
+            return {"state": self.starting["state"], "starting": dict(self.starting), "tabs": 0}
         status = self.engine.status()
         status["threads"] = threading.active_count()
         status["scene_frames"] = self.scene.frames_pushed
@@ -223,6 +269,8 @@ class Lab:
         # would come from cdn.holoviz.org (LOCAL_DIST is relative to "/", where the dashboard is served)
         pn.state.curdoc.template_variables["dist_url"] = LOCAL_DIST
         pn.state.curdoc.template = PAGE_TEMPLATE
+        if self.engine is None:
+            return starting_page(self)
         self.engine.tabs += 1
         self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)
@@ -274,7 +322,7 @@ class Lab:
         return not self.roles or request_role(handler, self.roles) is not None
 
     def _closed(self, session_context) -> None:
-        self.engine.tabs = max(0, self.engine.tabs - 1)
+        self.engine.tabs = max(0, self.engine.tabs - 1)  # only a dashboard's session counts its tab
         if MALLOC_TRIM is not None and not self._release_pending:
             self._release_pending = True
             self.server.io_loop.call_later(TRIM_DELAY, self._release_memory)
@@ -287,6 +335,9 @@ class Lab:
 
     def _push_scene(self) -> None:
         last = -1
+        while not self._ready.wait(0.2):
+            if self._stop.is_set():
+                return
         while not self._stop.is_set():
             start = time.perf_counter()
             last, frame = self.engine.frame(seen=last, timeout=0.2)
@@ -311,7 +362,7 @@ class Lab:
 
     def start(self) -> None:
         self.stream.io_loop = self.server.io_loop
-        self.engine.start()
+        self._starter.start()
         self._scene_thread.start()
         self.server.start()
 
@@ -326,7 +377,8 @@ class Lab:
 
     def stop(self) -> None:
         self._stop.set()
-        self.engine.stop()
+        if self.engine is not None:
+            self.engine.stop()
         self.scene.close()
         self.server.stop()
 
@@ -411,7 +463,6 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     logging.getLogger("bokeh.server.util").addFilter(lambda record: "wildcard" not in record.getMessage())
     if MALLOPT is not None:
         MALLOPT(M_ARENA_MAX, 2)
-    print("starting the engine (the first start compiles the numba kernels: a minute or two)...", flush=True)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
               **changes)
     mask_tokens_in_logs(tuple(lab.roles))
@@ -424,6 +475,9 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
               f"\"$(cat {where})\"", flush=True)
     else:
         print(f"GranLab lab at {lab.url} (open it in a browser; the preset starts when the page opens)", flush=True)
+    if lab.compiles:
+        print("the first start compiles the simulation's kernels (the page shows how far; `granlab compile` does it "
+              "ahead of time)", flush=True)
     lab.run_forever()
 
 
@@ -448,8 +502,9 @@ SPAWN_OUTPUT_LINES = 200
 def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
           program: tuple[str, ...] = (sys.executable, "-m", "granlab.app.cli"), cwd: str | Path | None = None):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
-    benchmarks and tests; ``program`` the command that is ``granlab``); returns the process (its
-    ``output``: the last lines it printed, read on in a thread), the URL it prints once serving
+    benchmarks and tests; ``program`` the command that is ``granlab``) and wait until its engine has
+    started; returns the process (its ``output``: the last lines it printed, read on in a thread),
+    the URL it prints once serving
     (with tokens, the presenter's, from its file) and the viewers' URL (None without tokens)."""
     process = subprocess.Popen([*program, "serve", "--port", "0", "--data-dir", str(data_dir), *options],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd)
@@ -468,9 +523,25 @@ def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
             process.output = deque(maxlen=SPAWN_OUTPUT_LINES)
             threading.Thread(target=process.output.extend, args=(process.stdout,), daemon=True).start()
             url = found.group(1) if found else (Path(data_dir) / PRESENTER_FILE).read_text().strip()
+            wait_started(url, process, deadline)
             return process, url, viewer
     process.kill()
     raise GranLabError(f"the lab server did not start within {timeout:.0f} s (run granlab serve to see why)")
+
+
+def wait_started(url: str, process, deadline: float) -> None:
+    """Wait until the lab at ``url`` (served by ``process``) has started its engine."""
+    while time.time() < deadline and process.poll() is None:
+        with contextlib.suppress(OSError, ValueError):
+            state = read_status(url).get("state")
+            if state == "failed":
+                break
+            if state not in ("compiling", "starting"):
+                return
+        time.sleep(0.2)
+    process.kill()
+    raise GranLabError(f"the lab's engine did not start within the time given (last lines: "
+                       f"{' | '.join(list(getattr(process, 'output', []))[-3:])})")
 
 
 def endpoint(url: str, name: str) -> str:

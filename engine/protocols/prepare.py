@@ -18,7 +18,8 @@ import numpy as np
 from ..errors import ParameterError
 from ..generate import radii, random_gas, square_lattice, strip_order
 from ..observables import clusters, columns
-from ..params import ContactLaw, Integration, Load, PeriodicCell, box_walls, nonnegative, positive, whole
+from ..params import (GILABERT_DT_SAFETY, ContactLaw, Integration, Load, PeriodicCell, box_walls,
+                      check_cell_mass_reading, nonnegative, positive, whole)
 from ..simulation import PARALLEL_MIN_DISKS, Simulation
 from ..state import CELL_MASS_FRACTION, ParticleState, default_cell_mass
 from .equilibrium import EquilibriumReport, Progress, advance, equilibrium, measured_pressure, relax
@@ -62,14 +63,6 @@ COMPRESSION_CHECK = 0.1
 force on a disk swings about its tolerance for a while: tested every tau, 5600 disks stopped at
 t = 36, though the criteria had held at t = 27.9 already. A test costs about 2 steps of 1600
 disks, and a tenth of tau is 1300 of their steps."""
-GILABERT_DT_SAFETY = 0.6
-"""The time step of Gilabert's preparations (methods 1 and 2), as a fraction of the engine's
-stability bound (:func:`granlab.engine.simulation.stability_bound`). That bound assumes 6 contacts on
-every disk; on equilibrated packings of 150 to 5600 disks the highest frequency of the contact
-network is 1.78-2.0 times below it, so 0.6 is about a third of the packings' own bound. Against
-0.3 (27 Nov 2026): method 1 at 200 disks, 8 cases x 2 seeds, the same Phi and z to 4 digits in 3
-of the 8 cohesive pairs and within the seeds' spread in the others; method 2 at 150 disks, 10
-seeds, Phi and z within 1.3 standard errors (docs/gilabert.md). A sample takes half the time."""
 
 
 def biaxial_box(count: int = 16, seed: int = 0, pressure: float = 1.0, stiffness: float = 100.0,
@@ -186,20 +179,6 @@ def gilabert_gas(count: int, solid_fraction: float, seed: int, diameter: float =
     return r[order], positions[order], length
 
 
-CELL_MASS_READINGS = ("mass", "per-length")
-"""Two readings of Gilabert's generalized mass ``M`` (Eq. 3, Sec. II A): ``mass``, 3/10 of the grain
-mass, a mass as Eq. 3 needs in 2D (its stresses are forces per length, its strain has no
-dimension); ``per-length``, 3/10 of the grain mass over the cell size ``L`` (the paper's words,
-which it calls "dimensionally correct": so they are for stresses per area, in 3D), in units of the
-largest diameter. The first reproduces Table III, the second compacts faster and ends looser and
-less coordinated (docs/gilabert.md, "The cohesive z gap")."""
-
-
-def check_cell_mass_reading(reading: str) -> str:
-    """``reading`` if it is one of :data:`CELL_MASS_READINGS`; a ParameterError naming them if not."""
-    if reading not in CELL_MASS_READINGS:
-        raise ParameterError("cell_mass", reading, "one of " + ", ".join(CELL_MASS_READINGS))
-    return reading
 
 
 def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = None,
