@@ -1,12 +1,17 @@
 """GranLab installs as one import name, ``granlab``, and its wheel works without the checkout."""
 
+import email
 import json
 import os
 import re
 import subprocess
 import sys
 import urllib.request
+import zipfile
 from pathlib import Path
+
+import pytest
+from packaging.specifiers import SpecifierSet
 
 import granlab
 import granlab.api
@@ -60,18 +65,48 @@ def test_every_public_name_resolves_from_where_it_is_listed():
     assert set(granlab.__all__) <= set(dir(granlab))
 
 
-def test_the_wheel_installed_in_a_clean_environment_runs_serves_exports_and_analyses(tmp_path):
-    """sdist and wheel built from the checkout; the wheel installed in a virtual environment of its
-    own and used from a folder outside the checkout: nothing may come from the repository."""
-    dist = tmp_path / "dist"
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory):
+    """The wheel built from the checkout (with its sdist)."""
+    dist = tmp_path_factory.mktemp("dist")
     subprocess.run([sys.executable, "-m", "build", "--outdir", str(dist), str(ROOT)], check=True,
                    capture_output=True, timeout=900)
     wheels = sorted(dist.glob("granlab-*.whl"))
     assert len(wheels) == 1 and len(sorted(dist.glob("granlab-*.tar.gz"))) == 1
+    return wheels[0]
+
+
+def test_the_wheel_says_its_license_its_types_and_the_pythons_it_runs_on(wheel):
+    with zipfile.ZipFile(wheel) as archive:
+        files = set(archive.namelist())
+        metadata = email.message_from_bytes(archive.read(next(name for name in files if name.endswith("/METADATA"))))
+    assert "granlab/py.typed" in files and any(name.endswith("licenses/LICENSE") for name in files)
+    assert metadata["License-Expression"] == "MIT"
+    admitted = SpecifierSet(metadata["Requires-Python"])
+    assert all(version in admitted for version in ("3.11", "3.12", "3.13", "3.14"))
+
+
+@pytest.mark.parametrize("python", ["3.12", "3.13"])
+def test_pip_resolves_the_wheel_and_every_dependency_as_built_wheels_for_newer_pythons(wheel, python, tmp_path):
+    """What these machines cannot run is checked with pip's resolver: each dependency of the wheel
+    exists as a binary wheel for that Python (nothing to compile on a newcomer's machine)."""
+    report = tmp_path / "report.json"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--dry-run", "--quiet", "--ignore-installed",
+                    "--only-binary=:all:", "--python-version", python, "--target", str(tmp_path / "target"),
+                    "--report", str(report), str(wheel)], check=True, capture_output=True, timeout=600)
+    installed = {item["metadata"]["name"].lower(): item for item in json.loads(report.read_text())["install"]}
+    assert {"granlab", "numba", "llvmlite", "numpy", "scipy", "h5py", "panel", "bokeh", "viser"} <= set(installed)
+    tag = f"cp{python.replace('.', '')}"
+    assert tag in installed["numba"]["download_info"]["url"], installed["numba"]["download_info"]["url"]
+
+
+def test_the_wheel_installed_in_a_clean_environment_runs_serves_exports_and_analyses(wheel, tmp_path):
+    """The wheel installed in a virtual environment of its own and used from a folder outside the
+    checkout: nothing may come from the repository."""
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
     bin_dir = venv / "bin"
-    subprocess.run([bin_dir / "python", "-m", "pip", "install", "--quiet", wheels[0]], check=True, capture_output=True,
+    subprocess.run([bin_dir / "python", "-m", "pip", "install", "--quiet", wheel], check=True, capture_output=True,
                    timeout=1800)
     work = tmp_path / "work"
     work.mkdir()
