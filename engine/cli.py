@@ -81,7 +81,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         if scene.threads:
             numba.set_num_threads(scene.threads)
         threaded = numba.get_num_threads() > 1 and scene.particles.count >= PARALLEL_MIN_DISKS
-        compile_sets(step_sets([scene.law.tangential_model], threaded) + ["state"])
+        compile_sets(step_sets([scene.law.tangential_model], threaded) + ["state", "packing"])
         sim = scene.build()
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
@@ -302,15 +302,21 @@ def _progress_line(line: str) -> None:
 
 
 def _prepare(args) -> dict:
+    import numba
+
     from .analysis.packing import packing_stats
+    from .compilation import compile_sets, step_sets
     from .io.h5md import RunWriter
     from .io.outputs import check_output
     from .protocols import prepare
+    from .simulation import PARALLEL_MIN_DISKS
 
     if args.out:
         check_output(args.out, force=args.force)
     if args.method == "compress" and args.dt_safety is not None:
         raise ParameterError("--dt-safety", args.dt_safety, "an option of --method 1 and 2 only")
+    threaded = numba.get_num_threads() > 1 and args.particles >= PARALLEL_MIN_DISKS
+    compile_sets(step_sets(["cundall-strack"], threaded) + ["state", "packing"])
     if args.method == "compress":
         prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
                                     friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0,
