@@ -57,7 +57,7 @@ RunOptions = namedtuple(
     "normal_model gravity has_loads dt time_origin step_offset n_steps skin max_overlap n_chunks gathered",
 )
 """What one call of the step driver needs besides the state and the tangential model (which it is
-compiled for, :func:`granlab.engine.kernels.integrate.advance`): the normal model's code, gravity (2,),
+compiled for, :data:`granlab.engine.kernels.integrate.ADVANCE`): the normal model's code, gravity (2,),
 whether disks carry applied loads, the step, the clock (``time_origin``, ``step_offset``), the
 number of steps, the Verlet skin, the overlap that counts as a divergence, the thread chunks and whether the
 contact loop gathers its common rows (:mod:`granlab.engine.kernels.gathered`)."""

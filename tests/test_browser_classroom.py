@@ -345,8 +345,8 @@ def test_each_control_works_from_the_keyboard(browser, lab):
     focus(page, ".record-button button")
     press("Enter")
     wait_status(lab, lambda s: (lab["data"] / "keys.gif").exists() and not s["jobs"], timeout=120)
+    expect(page.locator(".load-select select option", has_text="keys.h5")).to_have_count(1)  # the list refreshed
     focus(page, ".load-select select")
-    page.wait_for_timeout(1500)  # the list of saved runs is refreshed
     press("ArrowDown")
     focus(page, ".handout-button button")
     press("Enter")

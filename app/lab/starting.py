@@ -25,8 +25,12 @@ def progress_text(starting: dict) -> str:
 def starting_page(lab) -> pn.Column:
     """A page that follows ``lab.starting`` every half second and reloads once ``lab.engine`` runs."""
     message = pn.pane.HTML(html.escape(progress_text(lab.starting)), css_classes=["starting-text"],
-                           styles={"font-size": "20px"})
-    bar = pn.indicators.Progress(value=0, max=1, width=480, css_classes=["starting-progress"], bar_color="primary")
+                           styles={"font-size": "26px", "line-height": "1.4"}, sizing_mode="stretch_width")
+    bar = pn.indicators.Progress(value=0, max=1, height=24, sizing_mode="stretch_width",
+                                 css_classes=["starting-progress"], bar_color="primary")
+    after = pn.pane.HTML("The lab opens here by itself as soon as they are ready. <code>granlab compile</code> "
+                         "compiles every kernel ahead of time, the night before a class.",
+                         styles={"font-size": "20px", "color": "#444"}, sizing_mode="stretch_width")
     reload = pn.widgets.TextInput(value="", visible=False)
     reload.jscallback(value="window.location.reload()")
 
@@ -39,4 +43,6 @@ def starting_page(lab) -> pn.Column:
         bar.max, bar.value = max(1, starting["total"]), min(starting["done"], max(1, starting["total"]))
 
     pn.state.add_periodic_callback(refresh, period=REFRESH_MS)
-    return pn.Column(pn.pane.HTML("<h1>GranLab</h1>"), message, bar, reload, styles={"margin": "3em"})
+    return pn.Column(pn.pane.HTML("<h1 style='font-size:40px;margin:0'>GranLab</h1>"), message, bar, after, reload,
+                     styles={"margin": "4vh auto", "padding": "0 3vw", "max-width": "1100px"},
+                     sizing_mode="stretch_width")
