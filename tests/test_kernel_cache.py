@@ -20,7 +20,11 @@ KERNELS = cache.KERNELS
 
 
 def names(paths):
-    return {path.relative_to(KERNELS).as_posix() for path in paths}
+    return names_in(paths, KERNELS)
+
+
+def names_in(paths, folder):
+    return {path.relative_to(folder).as_posix() for path in paths}
 
 
 def test_a_kernel_is_stamped_by_the_modules_it_imports_directly_or_not():
@@ -98,6 +102,31 @@ def test_editing_a_law_restamps_the_kernels_that_contain_it_and_no_other(kernels
     with open(folder / "cache.py", "a") as module:
         module.write("\n# an edit\n")
     assert changed(after_laws, stamps()) == set()
+
+
+def test_imports_are_read_in_every_form_they_take_and_not_from_text(kernels_copy):
+    """Imports are read by pattern: across lines with comments, renamed, inside a function; a
+    commented-out one is no dependency, a docstring's line that reads as one is (a kernel then
+    recompiles more often than it must, never less)."""
+    folder, _, _ = kernels_copy
+    (folder / "probe.py").write_text(textwrap.dedent('''\
+        """Use as ``from .grid import paint_disks``.
+        from .energy import energy_terms
+        """
+        from .laws import (normal_force,  # why
+            tangential_force as force)
+        # from .packing import random_sequential_addition
+        from ..params import TANGENTIAL, NORMAL  # the registries
+
+
+        def later():
+            from .tangential import angle
+            return angle
+        '''))
+    cache.imports.cache_clear()
+    files, siblings, values = cache.imports(folder / "probe.py")
+    assert names_in(files, folder) == {"energy.py", "laws.py", "tangential/angle.py"}
+    assert siblings == () and values == (("params", "TANGENTIAL"), ("params", "NORMAL"))
 
 
 def test_the_same_sources_elsewhere_have_the_same_stamps(kernels_copy):

@@ -21,13 +21,13 @@ every copy of those sources, written under a lock.
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import functools
 import hashlib
 import importlib
 import itertools
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -87,28 +87,35 @@ def _module_file(name: str) -> Path | None:
     return path if KERNELS in path.parents and path.is_file() else None
 
 
+_RELATIVE_IMPORT = re.compile(r"^[ \t]*from[ \t]+(\.+)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n#]*)", re.M)
+_IMPORT_BY_NAME = re.compile(r"\.import_module\(")
+
+
 @functools.lru_cache(maxsize=None)
 def imports(path: Path) -> tuple[tuple[Path, ...], tuple[Path, ...], tuple[tuple[str, str], ...]]:
     """What the kernel module at ``path`` imports: the kernel modules it names, those it imports by
     name at run time (a package whose ``__init__`` calls ``importlib.import_module``: every module
-    beside it) and the ``(module, name)`` of the values it takes from the rest of the engine."""
+    beside it) and the ``(module, name)`` of the values it takes from the rest of the engine. Read
+    from its relative ``from`` imports by pattern, not by parsing: parsing the twenty modules took
+    0.18 s of every command's start."""
     package = path.parent.relative_to(ENGINE).parts
-    files, values, dynamic = [], [], False
-    for node in ast.walk(ast.parse(path.read_bytes())):
-        if isinstance(node, ast.Attribute) and node.attr == "import_module":
-            dynamic = True
-        if not isinstance(node, ast.ImportFrom) or node.level == 0:
-            continue
-        base = package[:len(package) - node.level + 1]
-        module = ".".join((*base, *(node.module.split(".") if node.module else ())))
-        for alias in node.names:
-            submodule = _module_file(f"{module}.{alias.name}" if module else alias.name)
+    text = path.read_text()
+    files, values = [], []
+    for dots, named, names in _RELATIVE_IMPORT.findall(text):
+        base = package[:len(package) - len(dots) + 1]
+        module = ".".join((*base, *(named.split(".") if named else ())))
+        for alias in re.sub(r"#[^\n]*", "", names).strip("() \t").split(","):
+            if not alias.split():
+                continue
+            name = alias.split()[0]  # ``name as other``
+            submodule = _module_file(f"{module}.{name}" if module else name)
             if submodule is not None:
                 files.append(submodule)
             elif _module_file(module) is not None:
                 files.append(_module_file(module))
             elif not module.startswith("kernels"):
-                values.append((module, alias.name))
+                values.append((module, name))
+    dynamic = _IMPORT_BY_NAME.search(text) is not None
     siblings = sorted(p for p in path.parent.glob("*.py") if p != path) if dynamic else []
     # a change to a module that compiles nothing recompiles nothing
     files = [file for file in dict.fromkeys(files) if not _uncompiled(file)]
