@@ -323,8 +323,10 @@ def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     folder = tmp_path / "method2"
     command = [sys.executable, "-m", "granlab.engine.cli", "reproduce", "gilabert-method2", "--particles", "30",
                "--samples", "2", "--max-time", "40", "--workers", "1", "--json"]
+    # Ctrl-C's default action, whatever this process inherited: a shell's background job ignores SIGINT
     process = subprocess.Popen([*command, "--out", str(folder)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, start_new_session=True)
+                               text=True, start_new_session=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     samples = folder / "samples"
     deadline = time.monotonic() + 240
     while not list(samples.glob("*.json")) and process.poll() is None and time.monotonic() < deadline:
