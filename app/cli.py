@@ -28,6 +28,9 @@ def build_parser():
     serve.add_argument("--seed", type=int, help="seed of the first preset (default 0)")
     serve.add_argument("--history-mib", type=float, metavar="MIB",
                        help="memory for the frames kept for saves and movies (default 64 MiB; the oldest go first)")
+    serve.add_argument("--pause-without-pages", type=float, metavar="SECONDS",
+                       help="pause a run left with no page open after SECONDS; it goes on when a page opens "
+                            "(default 60; 0: never)")
     # Every render option is read as text and checked by app.render, so that a wrong value is
     # one line naming the option and what is allowed (argparse would print its usage too).
     render = commands.add_parser("render", help="pictures and movies of a run file for slides (.png, .gif, .mp4)")
@@ -114,13 +117,17 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "serve":
+            from .lab.options import HISTORY_MIB, PAUSE_WITHOUT_PAGES, check_serve_options
+
+            limits = {"history_mib": HISTORY_MIB if args.history_mib is None else args.history_mib,
+                      "pause_without_pages": PAUSE_WITHOUT_PAGES if args.pause_without_pages is None
+                      else args.pause_without_pages}
+            check_serve_options(args.host, args.port, args.data_dir, **limits)
             from .lab.server import serve
 
             changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
-            if args.history_mib is not None:
-                changes["history_mib"] = args.history_mib
             serve(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
-                  **changes)
+                  **limits, **changes)
             return 0
         if args.command == "bench" and args.viewers is not None and not args.lab:
             raise GranLabError("--viewers goes with --lab: granlab bench --lab --viewers N")

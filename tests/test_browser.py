@@ -656,9 +656,10 @@ def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, t
 
 @pytest.fixture(scope="module")
 def small_history_lab(tmp_path_factory):
-    """A lab whose frames kept for saves may take 1 MiB: what remains of its memory is the tabs'."""
+    """A lab whose frames kept for saves may take 1 MiB: what remains of its memory is the tabs'; left
+    with no page open, it pauses after 4 s."""
     data = tmp_path_factory.mktemp("small-history-lab-data")
-    process, url, _ = spawn(data, "--history-mib", "1")
+    process, url, _ = spawn(data, "--history-mib", "1", "--pause-without-pages", "4")
     yield {"url": url, "process": process, "data": data}
     process.terminate()
     process.wait(timeout=30)
@@ -685,6 +686,30 @@ def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, sm
     after = churn(8)
     assert status(lab)["history_mib"] <= 1.0
     assert after - before < 10.0, f"8 tabs took the server from {before:.1f} to {after:.1f} MiB"
+
+
+def test_a_lab_left_with_no_page_pauses_says_why_and_goes_on_when_a_page_opens(browser, small_history_lab):
+    lab = small_history_lab
+
+    def open_tab():
+        page = browser.new_page()
+        lab_only(page, lab)
+        page.goto(lab["url"])
+        return page
+
+    page = open_tab()
+    running = wait_status(lab, lambda s: s["tabs"] == 1 and s["state"] == "running" and s["time"] > 0, timeout=60)
+    page.close()
+    paused = wait_status(lab, lambda s: s["state"] == "paused", timeout=30)
+    assert paused["tabs"] == 0 and paused["paused_for"] == "no page open for 4 s" and paused["time"] > running["time"]
+    assert any("no page open for 4 s: the run is paused; it goes on when a page opens" in line
+               for line in lab["process"].output)
+    time.sleep(1.0)
+    assert status(lab)["time"] == paused["time"]
+    page = open_tab()
+    wait_status(lab, lambda s: s["state"] == "running" and s["time"] > paused["time"] and s["paused_for"] == "")
+    assert any("a page opened: the run goes on" in line for line in lab["process"].output)
+    page.close()
 
 
 def test_the_lab_of_a_notebook_cell_runs_in_its_frame(page, tmp_path):

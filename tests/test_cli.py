@@ -215,6 +215,9 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
             ("--port", "0", "--data-dir", __file__): f"--data-dir {__file__!r} is a file, not a folder",
             ("--port", "0", "--history-mib", "0"): "--history-mib 0 is not allowed: more than 0 and at most",
             ("--port", "0", "--history-mib", "nan"): "--history-mib nan is not allowed",
+            ("--port", "0", "--pause-without-pages", "-1"): "--pause-without-pages -1 is not allowed: seconds from 0 "
+                                                             "(never pause) to 86400 (a day)",
+            ("--port", "0", "--pause-without-pages", "nan"): "--pause-without-pages nan is not allowed",
         }
         for args, message in refusals.items():
             process = subprocess.run([sys.executable, "-m", "granlab.app.cli", "serve", *args], capture_output=True,

@@ -413,6 +413,44 @@ def test_a_lab_waiting_for_its_first_tab_starts_the_preset_at_t0(tmp_path):
         lab.stop()
 
 
+def test_a_run_left_with_no_page_pauses_says_why_and_goes_on_when_a_page_opens(tmp_path, caplog):
+    lab = LabEngine(tmp_path, preset="ratchet16", wait_for_tab=True, pause_without_pages=0.5)
+    lab.start()
+    try:
+        lab.tabs = 1
+        lab.submit("tab_opened")
+        wait(lambda: lab.status()["state"] == "running" and lab.status()["step"] > 0)
+        lab.tabs = 2
+        lab.submit("tab_opened")
+        lab.tabs = 1
+        lab.submit("tab_closed")
+        time.sleep(1.0)  # one page still open: twice the pause and the run goes on
+        assert lab.status()["state"] == "running" and lab.status()["paused_for"] == ""
+        with caplog.at_level("INFO", logger="granlab.lab"):
+            lab.tabs = 0
+            lab.submit("tab_closed")
+            status = wait(lambda: lab.status()["state"] == "paused" and lab.status())
+        assert status["paused_for"] == "no page open for 0.5 s"
+        assert "no page open for 0.5 s: the run is paused; it goes on when a page opens" in caplog.messages
+        step = status["step"]
+        time.sleep(0.3)
+        assert lab.status()["step"] == step
+        lab.tabs = 1
+        lab.submit("tab_opened")
+        wait(lambda: lab.status()["state"] == "running" and lab.status()["step"] > step)
+        assert lab.status()["paused_for"] == "" and lab.status()["time"] > status["time"]  # not restarted
+        lab.submit("pause")  # paused by hand, the page closed, and opened again: it stays paused
+        lab.tabs = 0
+        lab.submit("tab_closed")
+        time.sleep(1.0)
+        lab.tabs = 1
+        lab.submit("tab_opened")
+        time.sleep(0.3)
+        assert lab.status()["state"] == "paused" and lab.status()["paused_for"] == ""
+    finally:
+        lab.stop()
+
+
 def test_record_writes_a_movie_of_the_last_simulated_seconds_into_the_data_folder(engine, tmp_path):
     import imageio.v3 as iio
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import logging
 import math
 import queue
 import re
@@ -45,10 +46,12 @@ from .analysis import AnalysisResult, AnalysisRunner
 from .buffers import Cursor, MessageLog, SeriesBuffer
 from ..media.drawing import COLOR_FIELDS, frame_caption
 from .jobs import JobOutcome, Jobs
+from .options import HISTORY_MIB
 from .replay import Replay, read_replay, read_time_limit, write_handout, write_lab_movie, write_run
 
+LOG = logging.getLogger("granlab.lab")
+
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-HISTORY_MIB = 64.0
 CHUNK_SECONDS = 0.02
 SERIES_CAPACITY = {"contacts": 1_000_000, "time": 400_000, "block": 400_000, "springs": 400_000, "cycles": 100_000,
                    "replay": 100_000}
@@ -92,11 +95,14 @@ class LabEngine:
     """The simulation of one lab server and the thread that runs it.
 
     With ``wait_for_tab`` the preset is built and its kernels compiled, but it starts (at t = 0)
-    only when the first tab opens (command ``tab_opened``). The frames kept for a save or a movie
-    take at most ``history_mib`` MiB (the oldest go first)."""
+    only when the first tab opens (command ``tab_opened``). With ``pause_without_pages`` (seconds),
+    a run left with no page open (every tab closed, command ``tab_closed``) pauses after that long and
+    goes on when a page opens: a lab forgotten after class takes no core from what follows. The
+    frames kept for a save or a movie take at most ``history_mib`` MiB (the oldest go first)."""
 
     def __init__(self, data_dir: str | Path, preset: str = "ratchet", frame_rate: float = 30.0,
-                 wait_for_tab: bool = False, history_mib: float = HISTORY_MIB, **changes):
+                 wait_for_tab: bool = False, history_mib: float = HISTORY_MIB, pause_without_pages: float = 0.0,
+                 **changes):
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.frame_interval = 1.0 / frame_rate
@@ -113,6 +119,10 @@ class LabEngine:
         self.running = not wait_for_tab
         self.error = ""
         self.tabs = 0
+        self.pause_without_pages = pause_without_pages
+        self._no_page_since: float | None = None
+        self.paused_for = ""
+        """Why the run paused by itself (no page open), while it stays paused; else empty."""
         self.command_ms = 0.0
         self.scene_fps = lambda: 0.0
         self._stop = threading.Event()
@@ -206,6 +216,7 @@ class LabEngine:
             else:
                 wait = self._run_chunk() if self.running else 0.05
             self._drain(wait)
+            self._pause_if_no_page()
             now = time.perf_counter()
             if now - last_publish >= self.frame_interval:
                 last_publish = now
@@ -249,9 +260,17 @@ class LabEngine:
             elif command == "setup":
                 self._setup(payload["name"], payload["changes"])
             elif command == "tab_opened":
+                self._no_page_since = None
                 if self.waiting:
                     self.waiting, self.running = False, True
                     self._switch(make_preset(self._preset_name(), self._settings()))
+                elif self.paused_for:
+                    self.running, self.paused_for = True, ""
+                    self._reanchor()
+                    LOG.info("a page opened: the run goes on")
+            elif command == "tab_closed":
+                if self.tabs == 0:
+                    self._no_page_since = time.monotonic()
             elif command == "play":
                 self.running, self.error, self._stepping = True, "", None
                 if isinstance(self.source, Replay) and self.source.index == self.source.count - 1:
@@ -296,6 +315,15 @@ class LabEngine:
         except (GranLabError, ValueError, OSError) as error:
             self.messages.add("error", str(error), control)
         self._publish()
+
+    def _pause_if_no_page(self) -> None:
+        since = self._no_page_since
+        if not (self.running and self.pause_without_pages > 0 and self.tabs == 0 and since is not None
+                and time.monotonic() - since >= self.pause_without_pages):
+            return
+        self.running, self._stepping = False, None
+        self.paused_for = f"no page open for {self.pause_without_pages:g} s"
+        LOG.info("%s: the run is paused; it goes on when a page opens", self.paused_for)
 
     def _preset_only(self, what: str) -> Preset:
         if not isinstance(self.source, Preset):
@@ -513,11 +541,13 @@ class LabEngine:
         seconds = sum(r[3] for r in self._rate)
         span = self._rate[-1][0] - self._rate[0][0] + self._rate[0][3] if self._rate else 0.0
         simulated = self._rate[-1][4] - self._rate[0][4] if len(self._rate) > 1 else 0.0
+        if self.running:
+            self.paused_for = ""
         state = self._state()
         if self._stepping is not None:
             interval = self._stepping - self._step_from
             status["step_progress"] = (self._time() - self._step_from) / interval if interval > 0 else 1.0
-        status.update(state=state, error=self.error,
+        status.update(state=state, error=self.error, paused_for=self.paused_for,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
                       speed_achieved=simulated / span / status["cycle_time"] if span > 0 and self.running else 0.0,

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import errno
 import gc
 import io
 import json
@@ -50,20 +49,19 @@ from websockets.http11 import Request
 from granlab.engine.compilation import announced, compile_sets, missing, step_sets
 from granlab.engine.errors import GranLabError
 from granlab.engine.io.jsonsafe import jsonable
-from granlab.engine.io.outputs import check_output
 from granlab.engine.params import TANGENTIAL
 from granlab.engine.protocols.presets import PRESETS, preset_settings
 
 from . import lessons
 from .dashboard import Dashboard
-from .engine_thread import HISTORY_MIB, LabEngine
+from .engine_thread import LabEngine
+from .options import HISTORY_MIB, LOCAL_HOSTS, PAUSE_WITHOUT_PAGES, check_serve_options
 from .scene import SceneView
 from .starting import starting_page
 from .stream import StreamSocket, ViewerStream
 
 VIEWER_SCENE = Path(__file__).resolve().parents[2] / "static" / "viewer" / "scene.html"
 
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 # glibc (None elsewhere) keeps what a closed tab's session freed in the arena of the thread that
 # freed it, one arena per thread up to 8 per core: a lab opened and closed in many tabs would hold
 # it all. Two arenas and a trim after sessions end hand it back.
@@ -72,7 +70,6 @@ MALLOC_TRIM = getattr(LIBC, "malloc_trim", None)
 MALLOPT = getattr(LIBC, "mallopt", None)
 M_ARENA_MAX = -8
 # the frames kept for saves and movies may take at most half this machine's memory
-MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
 TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
 # a phone lays the page out at its own width (without this, as a 980-pixel desktop page shrunk)
 PAGE_TEMPLATE = _env.from_string('{% extends base %}{% block preamble %}{{ super() }}'
@@ -188,7 +185,7 @@ class Lab:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
                  preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False,
-                 history_mib: float = HISTORY_MIB, **changes):
+                 history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES, **changes):
         self.host = host
         self.roles = {secrets.token_urlsafe(16): role for role in ("presenter", "viewer")} if tokens else {}
         settings = preset_settings(preset, **changes)  # a bad setting is refused before anything starts
@@ -200,7 +197,8 @@ class Lab:
                          "current": "", "seconds": 0.0, "error": ""}
         self._ready = threading.Event()
         self._starter = threading.Thread(target=self._start_engine, name="granlab-starter", daemon=True,
-                                         args=(data_dir, preset, history_mib, changes, kernel_sets))
+                                         args=(data_dir, preset, history_mib, pause_without_pages, changes,
+                                               kernel_sets))
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints its own address: the page embeds it
             self.scene = SceneView(host=host, port=0, admit=self._admit_scene,
                                    may_pick=self._presenter_path if tokens else None)
@@ -230,12 +228,14 @@ class Lab:
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
                                **auth)
 
-    def _start_engine(self, data_dir, preset: str, history_mib: float, changes: dict, kernel_sets) -> None:
+    def _start_engine(self, data_dir, preset: str, history_mib: float, pause_without_pages: float, changes: dict,
+                      kernel_sets) -> None:
         first, later = kernel_sets
         try:
             compile_sets(first, on_change=self.starting.update)
             with announced():  # what the preset uses beyond the sets, if anything
-                engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib, **changes)
+                engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib,
+                                   pause_without_pages=pause_without_pages, **changes)
         except Exception as error:  # noqa: BLE001 (shown on every page and in the terminal)
             self.starting.update(state="failed", error=f"{type(error).__name__}: {error}")
             print(f"granlab serve: error: the engine did not start: {self.starting['error']}", file=sys.stderr,
@@ -323,6 +323,7 @@ class Lab:
 
     def _closed(self, session_context) -> None:
         self.engine.tabs = max(0, self.engine.tabs - 1)  # only a dashboard's session counts its tab
+        self.engine.submit("tab_closed")
         if MALLOC_TRIM is not None and not self._release_pending:
             self._release_pending = True
             self.server.io_loop.call_later(TRIM_DELAY, self._release_memory)
@@ -389,27 +390,6 @@ def _free_port(host: str) -> int:
         return sock.getsockname()[1]
 
 
-def check_address(host: str, port: int) -> None:
-    """Refuse, before the engine starts, an address the lab could not serve on: a port out of range,
-    a host name that does not resolve or is not this machine's, a port another program holds."""
-    if not 0 <= port <= 65535:
-        raise GranLabError(f"--port {port} is not allowed: a port from 1 to 65535, or 0 for any free port")
-    try:
-        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
-    except (socket.gaierror, UnicodeError) as error:
-        raise GranLabError(f"--host {host!r} is not an address of this machine: {error} (127.0.0.1 serves this "
-                           "machine only, 0.0.0.0 every network it is on)") from error
-    with socket.socket(family) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            sock.bind((host, port))
-        except OSError as error:
-            taken = error.errno == errno.EADDRINUSE
-            raise GranLabError(f"--port {port} is in use by another program: give another port, or --port 0 for "
-                               "any free one" if taken else f"--host {host!r} cannot be served: {error.strerror} "
-                               "(127.0.0.1 serves this machine only, 0.0.0.0 every network it is on)") from error
-
-
 class ClosedTabFilter(logging.Filter):
     """Drops the warnings and tracebacks of a message sent to a tab that just closed: a closed
     tab is normal in a classroom, and the terminal the lab runs in should stay readable."""
@@ -446,15 +426,14 @@ def mask_tokens_in_logs(tokens) -> None:
 
 
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
-          tokens: bool = False, history_mib: float = HISTORY_MIB, **changes) -> None:
+          tokens: bool = False, history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES,
+          **changes) -> None:
     """Start the lab and serve until interrupted (prints the URL, or with tokens the presenter's and
     the viewers' URLs; any host but this machine's loopback serves with tokens). ``changes``:
     settings of the first preset (e.g. ``particles=5600``)."""
-    check_address(host, port)
-    check_output(data_dir, "--data-dir", folder=True)
-    if not 0 < history_mib <= MAX_HISTORY_MIB:
-        raise GranLabError(f"--history-mib {history_mib:g} is not allowed: more than 0 and at most "
-                           f"{MAX_HISTORY_MIB:.0f} (half this machine's memory)")
+    check_serve_options(host, port, data_dir, history_mib, pause_without_pages)
+    logging.getLogger("granlab.lab").setLevel(logging.INFO)
+    logging.getLogger("granlab.lab").addHandler(logging.StreamHandler(sys.stderr))
     tokens = tokens or host not in LOCAL_HOSTS
     for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
         logging.getLogger(name).addFilter(ClosedTabFilter())
@@ -464,7 +443,7 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     if MALLOPT is not None:
         MALLOPT(M_ARENA_MAX, 2)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
-              **changes)
+              pause_without_pages=pause_without_pages, **changes)
     mask_tokens_in_logs(tuple(lab.roles))
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "

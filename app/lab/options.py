@@ -1,0 +1,53 @@
+"""What ``granlab serve`` is given, checked before anything heavy is imported or started: a bad
+address, folder or limit is refused in a fraction of a second, not after the seconds that panel,
+bokeh, viser and numba take to import."""
+
+from __future__ import annotations
+
+import errno
+import os
+import socket
+
+from granlab.engine.errors import GranLabError
+from granlab.engine.io.outputs import check_output
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+HISTORY_MIB = 64.0
+MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
+PAUSE_WITHOUT_PAGES = 60.0
+"""Seconds a run goes on with no page open before it pauses (``--pause-without-pages``)."""
+MAX_PAUSE_WITHOUT_PAGES = 86400.0
+
+
+def check_serve_options(host: str, port: int, data_dir, history_mib: float, pause_without_pages: float) -> None:
+    """Refuse, before the lab starts, what it could not serve with (each in one line naming what is
+    allowed)."""
+    check_address(host, port)
+    check_output(data_dir, "--data-dir", folder=True)
+    if not 0 < history_mib <= MAX_HISTORY_MIB:  # NaN fails too
+        raise GranLabError(f"--history-mib {history_mib:g} is not allowed: more than 0 and at most "
+                           f"{MAX_HISTORY_MIB:.0f} (half this machine's memory)")
+    if not 0 <= pause_without_pages <= MAX_PAUSE_WITHOUT_PAGES:
+        raise GranLabError(f"--pause-without-pages {pause_without_pages:g} is not allowed: seconds from 0 (never "
+                           f"pause) to {MAX_PAUSE_WITHOUT_PAGES:g} (a day)")
+
+
+def check_address(host: str, port: int) -> None:
+    """Refuse an address the lab could not serve on: a port out of range, a host name that does not
+    resolve or is not this machine's, a port another program holds."""
+    if not 0 <= port <= 65535:
+        raise GranLabError(f"--port {port} is not allowed: a port from 1 to 65535, or 0 for any free port")
+    try:
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+    except (socket.gaierror, UnicodeError) as error:
+        raise GranLabError(f"--host {host!r} is not an address of this machine: {error} (127.0.0.1 serves this "
+                           "machine only, 0.0.0.0 every network it is on)") from error
+    with socket.socket(family) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as error:
+            taken = error.errno == errno.EADDRINUSE
+            raise GranLabError(f"--port {port} is in use by another program: give another port, or --port 0 for "
+                               "any free one" if taken else f"--host {host!r} cannot be served: {error.strerror} "
+                               "(127.0.0.1 serves this machine only, 0.0.0.0 every network it is on)") from error
