@@ -343,9 +343,12 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
             if warm_up is not None:
                 warm_up(lambda phase: state.update(phase=phase))
             state["phase"] = "starting the workers"
+            # the workers' own logs, critical ones only: a worker still running when the scheduler closes
+            # (Ctrl-C on a busy machine) logs the lost connection with its traceback; a task's failure
+            # comes back here with its future, and a lost worker's as well
             with _workers_leave_interrupts_to_us():
                 cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                                       processes=True, dashboard_address=None, silence_logs=40)
+                                       processes=True, dashboard_address=None, silence_logs=50)
             client = Client(cluster)
         with client:
             futures = [client.submit(function, *task, key=key, pure=False) for task, key in zip(tasks, keys)]
