@@ -17,11 +17,12 @@ SUITE_KERNEL_SETS = [name for name in KERNEL_SETS if not name.endswith("-threads
 models' several-thread steps compile in the tests that use them)."""
 
 
-@pytest.fixture(scope="session", autouse=True)
-def compiled_kernels():
+def pytest_sessionstart(session):
     """The kernels the suite runs, compiled at its start side by side (a worker a core) into the kernel
-    cache that every test, every subprocess and the wheel's virtual environment then load them from."""
-    compile_sets(SUITE_KERNEL_SETS)
+    cache that every test, every subprocess and the wheel's virtual environment then load them from;
+    with pytest-xdist, once, before its workers start."""
+    if not hasattr(session.config, "workerinput") and not session.config.option.collectonly:
+        compile_sets(SUITE_KERNEL_SETS)
 
 
 def periodic_gas(count=120, length=20.0, seed=1, speed=1.0, law=None, dt_safety=0.1, skin=None, radius_range=(0.4, 0.6)):
