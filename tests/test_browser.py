@@ -11,6 +11,8 @@ import logging
 import math
 import os
 import shutil
+import subprocess
+import sys
 import time
 import urllib.error
 import urllib.request
@@ -545,6 +547,18 @@ def handshake(address: str, origin: str | None) -> int:
         return error.response.status_code
 
 
+def dashboard_handshake(address: str, origin: str) -> int:
+    """The HTTP status the dashboard's (bokeh's) websocket answers: 101 if it opens."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    try:
+        with connect(address, origin=origin, subprotocols=["bokeh"], open_timeout=10):
+            return 101
+    except InvalidStatus as error:
+        return error.response.status_code
+
+
 def test_the_scene_websocket_admits_only_the_scene_page_origin(page, lab):
     open_dashboard(page, lab)
     address, port = scene_socket(page)
@@ -562,12 +576,22 @@ def token_lab(tmp_path_factory):
     process.wait(timeout=30)
 
 
-def http_status(url: str) -> int:
+class _NoRedirect(urllib.request.HTTPRedirectHandler):
+    def redirect_request(self, *args, **kwargs):
+        return None
+
+
+def http_status(url: str, body: list | None = None) -> int:
+    """The status of a GET of ``url`` itself (a redirect is its 3xx, not followed); its text added
+    to ``body``."""
     try:
-        with urllib.request.urlopen(url, timeout=10) as response:
-            return response.status
+        with urllib.request.build_opener(_NoRedirect).open(url, timeout=10) as response:
+            status, text = response.status, response.read()
     except urllib.error.HTTPError as error:
-        return error.code
+        status, text = error.code, error.read()
+    if body is not None:
+        body.append(text.decode(errors="replace"))
+    return status
 
 
 def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
@@ -576,10 +600,21 @@ def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong",
                 bare + "lesson?preset=block", bare + "viewer-scene", bare + "viewer-scene?token=wrong"):
         assert http_status(url) == 403, url
+    for url in (bare, bare + "?token=wrong"):
+        body = []
+        assert http_status(url, body) == 403, url  # the page itself, no redirect to it
+        assert "open the full address the presenter gave" in body[0], url
     assert http_status(endpoint(token_lab["viewer"], "status")) == 200
     # the presenter's address is not printed (a projector may show the terminal) but kept for its owner
     kept = token_lab["data"] / ".presenter-address"
     assert kept.stat().st_mode & 0o777 == 0o600 and kept.read_text().strip() == token_lab["url"]
+    # a second lab on the same folder would have written its own presenter's address over this one
+    second = subprocess.run([sys.executable, "-m", "granlab.app.cli", "serve", "--port", "0", "--tokens",
+                             "--data-dir", str(token_lab["data"])], capture_output=True, text=True, timeout=120)
+    assert second.returncode == 2 and second.stderr.count("\n") == 1, second.stderr
+    assert second.stderr.startswith(f"granlab serve: error: --data-dir {str(token_lab['data'])!r} is in use by "
+                                    f"another lab (process {token_lab['process'].pid}): give each lab a folder")
+    assert kept.read_text().strip() == token_lab["url"]
 
 
 def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_line(caplog):
@@ -643,6 +678,10 @@ def test_with_tokens_the_presenter_controls_and_a_viewer_only_watches(browser, t
     assert status(token_lab)["state"] == "running"
     presenter.locator(".play-button button").click()
     wait_status(token_lab, lambda s: s["state"] == "paused")
+    # the dashboard's websocket, with the presenter's token: from another site's page, refused
+    dashboard_socket = token_lab["url"].replace("http://", "ws://").replace("/?", "/ws?")
+    assert dashboard_handshake(dashboard_socket, "http://evil.example") == 403
+    assert dashboard_handshake(dashboard_socket, token_lab["url"].split("/?")[0]) != 403
     # the presenter's 3D scene: its token opens the websocket, from the scene page's own origin only
     # (a viewer's scene is the viewers' stream: test_browser_classroom.py)
     address, port = scene_socket(presenter)
@@ -754,8 +793,6 @@ def test_a_first_start_serves_at_once_shows_the_compile_on_the_page_then_the_pre
     out of a copy of the suite's kernel cache) prints its address at once; a page opened then shows
     how far the compile is, and reloads into the dashboard with the preset running once it is done."""
     import re
-    import subprocess
-    import sys
 
     from granlab.engine.kernels.cache import cache_root
 

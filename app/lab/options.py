@@ -4,14 +4,23 @@ bokeh, viser and numba take to import."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import socket
+from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # Windows: a folder is not claimed
+    fcntl = None
 
 from granlab.engine.errors import GranLabError
 from granlab.engine.io.outputs import check_output
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+CLAIM_FILE = ".lab-lock"
+"""The file of the data folder a running lab holds locked (with its process id in it)."""
 HISTORY_MIB = 64.0
 MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
 PAUSE_WITHOUT_PAGES = 60.0
@@ -51,3 +60,27 @@ def check_address(host: str, port: int) -> None:
             raise GranLabError(f"--port {port} is in use by another program: give another port, or --port 0 for "
                                "any free one" if taken else f"--host {host!r} cannot be served: {error.strerror} "
                                "(127.0.0.1 serves this machine only, 0.0.0.0 every network it is on)") from error
+
+
+@contextlib.contextmanager
+def claimed_data_folder(data_dir):
+    """The data folder locked for this lab while in the block; refused if another lab holds it: its
+    presenter's address, its saves and its movies are there."""
+    try:
+        Path(data_dir).mkdir(parents=True, exist_ok=True)
+        handle = open(Path(data_dir) / CLAIM_FILE, "a+")
+    except OSError as error:
+        raise GranLabError(f"--data-dir {str(data_dir)!r} cannot be used: {error.strerror}") from error
+    with handle:
+        if fcntl is not None:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                handle.seek(0)
+                raise GranLabError(f"--data-dir {str(data_dir)!r} is in use by another lab (process "
+                                   f"{handle.read().strip() or '?'}): give each lab a folder of its own") from None
+            handle.seek(0)
+            handle.truncate()
+            handle.write(str(os.getpid()))
+            handle.flush()
+        yield

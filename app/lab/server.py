@@ -55,7 +55,7 @@ from granlab.engine.protocols.presets import PRESETS, preset_settings
 from . import lessons
 from .dashboard import Dashboard
 from .engine_thread import LabEngine
-from .options import HISTORY_MIB, LOCAL_HOSTS, PAUSE_WITHOUT_PAGES, check_serve_options
+from .options import HISTORY_MIB, LOCAL_HOSTS, PAUSE_WITHOUT_PAGES, check_serve_options, claimed_data_folder
 from .scene import SceneView
 from .starting import starting_page
 from .stream import StreamSocket, ViewerStream
@@ -108,7 +108,17 @@ class TokenAuth(AuthProvider):
 
     @property
     def get_user(self):
-        return lambda handler: request_role(handler, self.roles)
+        return self._role
+
+    def _role(self, handler: tornado.web.RequestHandler) -> str | None:
+        """The request's role; a page or file asked for without a valid token is answered here, 403
+        with the page saying what to open (bokeh would redirect it to its login address)."""
+        role = request_role(handler, self.roles)
+        if role is None and not isinstance(handler, tornado.websocket.WebSocketHandler):
+            handler.set_status(403)
+            handler.finish(LOCKED_PAGE)
+            raise tornado.web.Finish()
+        return role
 
     @property
     def login_url(self) -> str:
@@ -212,9 +222,10 @@ class Lab:
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
         # environment holds (cdn would point every stylesheet at cdn.holoviz.org)
         bokeh_settings.resources.set_value("server")
-        # with tokens the page may be opened by any address of this machine; the SameSite cookie keeps
-        # other sites' pages from using a presenter's token
-        origins = ["*"] if self.roles else sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
+        # the dashboard's websocket admits pages of this machine's names; with tokens, the page may be
+        # opened by any address of this machine: each one a page was opened by with a valid token is
+        # admitted then (_admit_page_origin), and no other site's page
+        origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
         auth = {"auth_provider": TokenAuth(self.roles)} if self.roles else {}
         self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
                                show=False, start=False, title="GranLab", threaded=False, verbose=False,
@@ -269,6 +280,7 @@ class Lab:
         # would come from cdn.holoviz.org (LOCAL_DIST is relative to "/", where the dashboard is served)
         pn.state.curdoc.template_variables["dist_url"] = LOCAL_DIST
         pn.state.curdoc.template = PAGE_TEMPLATE
+        self._admit_page_origin()
         if self.engine is None:
             return starting_page(self)
         self.engine.tabs += 1
@@ -284,6 +296,13 @@ class Lab:
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
         query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items() if values}
         return Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query).view()
+
+    def _admit_page_origin(self) -> None:
+        """With tokens: the address this page was opened by (its request passed the token check) is
+        an origin the dashboard's websocket admits, the page's own."""
+        host = (pn.state.headers or {}).get("Host")
+        if self.roles and host:
+            self.server._tornado.websocket_origins.add(host.lower() if ":" in host else f"{host.lower()}:80")
 
     def _session_token(self) -> str:
         """The valid token of the page being opened: in its address, else in its cookie."""
@@ -432,14 +451,16 @@ def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-da
     the viewers' URLs; any host but this machine's loopback serves with tokens). ``changes``:
     settings of the first preset (e.g. ``particles=5600``)."""
     check_serve_options(host, port, data_dir, history_mib, pause_without_pages)
+    with claimed_data_folder(data_dir):  # one lab a folder: its presenter's address is there
+        _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes)
+
+
+def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes) -> None:
     logging.getLogger("granlab.lab").setLevel(logging.INFO)
     logging.getLogger("granlab.lab").addHandler(logging.StreamHandler(sys.stderr))
     tokens = tokens or host not in LOCAL_HOSTS
     for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
         logging.getLogger(name).addFilter(ClosedTabFilter())
-    # with tokens any origin is meant (the token and the SameSite cookie guard the lab): bokeh's
-    # warning about it would only alarm the presenter
-    logging.getLogger("bokeh.server.util").addFilter(lambda record: "wildcard" not in record.getMessage())
     if MALLOPT is not None:
         MALLOPT(M_ARENA_MAX, 2)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
