@@ -23,6 +23,7 @@ import pytest
 from playwright.sync_api import expect
 
 from granlab.app.lab.bench import resident_mib
+from granlab.app.lab.pace import DRAW_WAIT_SECONDS
 from granlab.app.lab.server import TRIM_DELAY, endpoint, read_status, spawn
 from granlab.engine.protocols.presets import PRESETS
 
@@ -299,10 +300,14 @@ def test_a_hostile_file_and_a_save_never_stop_the_simulation(page, lab):
     wait_status(lab, lambda s: s["time"] > 5.0, timeout=120)
     type_into(page, ".save-name", "busy.h5")
     page.click(".save-button button")
-    expect(page.locator(".job-save")).to_contain_text("saving busy.h5…", timeout=10000)
-    expect(page.locator(".readout")).to_contain_text("saving busy.h5…")
-    step = status(lab)["step"]
-    wait_status(lab, lambda s: s["jobs"] and s["step"] > step + 500, timeout=30)  # stepping while it saves
+    # while the save runs (its own process, a second or more): the engine steps on, and the page says so
+    first = wait_status(lab, lambda s: s["jobs"], timeout=30)
+    steps, shown = [first["step"]], set()
+    while (s := status(lab))["jobs"]:
+        steps.append(s["step"])
+        shown |= {css for css in (".job-save", ".readout") if page.locator(css, has_text="saving busy.h5…").count()}
+    assert steps[-1] > steps[0] + 500, steps
+    assert shown == {".job-save", ".readout"}
     expect(page.locator(".note-save")).to_contain_text("saved", timeout=60000)
     expect(page.locator(".job-save")).to_be_hidden()
     assert (lab["data"] / "busy.h5").exists()
@@ -506,6 +511,44 @@ def test_two_tabs_both_update(browser, lab):
         wait_model(page, "coulomb-cone-paths", f"m.data.x0.length > {length}")
     for page in pages:
         page.close()
+
+
+RECORD_REFRESHES = """
+window.refreshes = []
+const Native = window.WebSocket
+window.WebSocket = class extends Native {
+  constructor(...args) {
+    super(...args)
+    this.addEventListener("message", (event) => {  // before bokeh reads it: what the page had drawn then
+      if (typeof event.data !== "string" || !event.data.includes('"sent"')) return
+      for (const change of JSON.parse(event.data).events || []) {
+        if (change.attr !== "sent") continue
+        const pacer = Bokeh.documents[0].get_model_by_id(change.model.id)
+        window.refreshes.push({sent: change.new, drawn: pacer.drawn, t: performance.now()})
+      }
+    })
+  }
+}
+"""
+
+
+def test_a_page_that_draws_slowly_is_sent_a_refresh_only_once_it_drew_the_last(browser, lab):
+    """A browser slowed eightfold (a phone, a busy laptop) never has refreshes queued: each arrives
+    after the page drew the one before (or after the server waited DRAW_WAIT_SECONDS), so a click
+    waits behind one refresh at most."""
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    page.add_init_script(RECORD_REFRESHES)
+    open_dashboard(page, lab, "ratchet16")
+    slow = page.context.new_cdp_session(page)
+    slow.send("Emulation.setCPUThrottlingRate", {"rate": 8})
+    page.wait_for_timeout(15000)
+    slow.send("Emulation.setCPUThrottlingRate", {"rate": 1})
+    arrived = page.evaluate("() => window.refreshes")
+    assert len(arrived) >= 5
+    queued = [later for earlier, later in zip(arrived, arrived[1:])
+              if later["drawn"] < later["sent"] - 1 and later["t"] - earlier["t"] < 1000 * DRAW_WAIT_SECONDS]
+    assert not queued, arrived
+    page.close()
 
 
 def test_analysis_tab_shows_the_force_network_and_only_the_figures_the_analysis_has(page, lab):

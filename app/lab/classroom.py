@@ -8,6 +8,8 @@ document pulled as bokeh's client pulls it), the scene's address from the iframe
 document, and the scene's websocket: a viewer's, the viewers' stream of the dashboard's server
 (app/lab/stream.py); the presenter's, viser's (its subprotocol, the page's origin) with one camera
 report (viser counts a client as connected from its first one; a browser sends it once it draws).
+Each page says it drew each refresh as soon as it arrives (app/lab/pace.py), as a page that draws at
+once would.
 
 Counted per socket from outside the server: websocket messages and bytes received (neither
 server compresses its websocket: these are the bytes on the wire, less the frames' few bytes of
@@ -133,6 +135,8 @@ class Session:
         self._pending: list = []  # the websocket messages of the bokeh message being received
         self._header: dict = {}  # and its header
         self._scene_decoder = zstandard.ZstdDecompressor()
+        self._acks: set[asyncio.Task] = set()
+        self._sending = asyncio.Lock()  # a bokeh message is three websocket messages: never two interleaved
 
     async def open(self) -> None:
         token, cookie, origin = await asyncio.to_thread(_page, self.url)
@@ -194,6 +198,12 @@ class Session:
         if kind == "PULL-DOC-REPLY":
             self.document = json.loads(parts[2])["doc"]
             _models(self.document, self.names)
+        if kind == "PATCH-DOC" and '"sent"' in parts[2]:  # a page that draws each refresh at once says so
+            for event in json.loads(parts[2]).get("events", []):
+                if event.get("attr") == "sent":
+                    ack = asyncio.create_task(self.command(event["model"]["id"], "drawn", event["new"]))
+                    self._acks.add(ack)
+                    ack.add_done_callback(self._acks.discard)
         anatomy = self.bokeh.anatomy
         if anatomy is None:
             return kind
@@ -255,10 +265,11 @@ class Session:
     async def command(self, model: str, attr: str, value) -> None:
         """Send a change of ``model``'s ``attr`` as the page does when a widget changes."""
         bokeh = self.sockets[0]
-        await bokeh.send(json.dumps({"msgid": f"c{time.monotonic_ns()}", "msgtype": "PATCH-DOC"}))
-        await bokeh.send("{}")
-        await bokeh.send(json.dumps({"events": [{"kind": "ModelChanged", "model": {"id": model}, "attr": attr,
-                                                 "new": value}]}))
+        async with self._sending:
+            await bokeh.send(json.dumps({"msgid": f"c{time.monotonic_ns()}", "msgtype": "PATCH-DOC"}))
+            await bokeh.send("{}")
+            await bokeh.send(json.dumps({"events": [{"kind": "ModelChanged", "model": {"id": model}, "attr": attr,
+                                                     "new": value}]}))
 
     def snapshot(self) -> dict:
         return {"bokeh": self.bokeh.snapshot(), "scene": self.scene.snapshot()}

@@ -7,8 +7,10 @@ plots the preset is about, with the other plots, the preset's explanation and th
 one click away. Nothing needs scrolling at 1920×1080 or 1366×768.
 
 Every tab builds its own widgets, bokeh figures and sources (bokeh models cannot be shared
-between sessions) and pulls, every 200 ms (a viewer's every 500 ms), the rows it has not seen from the engine's ring
-buffers. Controls only queue commands for the engine thread; nothing here waits on it. A value
+between sessions) and pulls, every 200 ms (a viewer's every second), the rows it has not seen from
+the engine's ring buffers; it sends them, with every other change of that refresh, in one message,
+once the page has drawn the last one (:mod:`.pace`): a page that draws slowly gets fewer refreshes,
+never a queue. Controls only queue commands for the engine thread; nothing here waits on it. A value
 the engine refuses goes back to the value in effect, with the message next to its control.
 """
 
@@ -34,6 +36,7 @@ from . import analysis, lessons
 from .buffers import Cursor
 from .keyboard import Keyboard
 from .live import UPDATE_SECONDS, LiveText, describe
+from .pace import DRAW_WAIT_SECONDS, Pacer
 from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import AnalysisFigures, compact, make_plot
 
@@ -211,6 +214,8 @@ class Dashboard:
                                             margin=(12, 1, 5, 1)) for name in SPEED_NAMES}
         self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 8))
         self.live = LiveText(css_classes=["live-text"], width=1, height=1, margin=0)
+        self.pacer = Pacer(width=0, height=0, margin=0)
+        self._sent_at = -math.inf
         self._live_said = -math.inf
         self._live_run: tuple[str, float] | None = None  # (preset, time) at the last refresh
         self.keyboard = Keyboard(enabled=not self.viewer, css_classes=["keys"], width=80, height=31,
@@ -488,6 +493,15 @@ class Dashboard:
 
     # ------------------------------------------------------------------ the periodic pull
     def _refresh(self) -> None:
+        """The page's next refresh, in one message, once the page has drawn the last one."""
+        if self.pacer.waiting() and time.monotonic() - self._sent_at < DRAW_WAIT_SECONDS:
+            return
+        with pn.io.hold():
+            self._update()
+            self.pacer.sent += 1
+        self._sent_at = time.monotonic()
+
+    def _update(self) -> None:
         status = self.engine.status()
         preset = status.get("preset", "")
         replay = status.get("replay")
@@ -767,7 +781,7 @@ class Dashboard:
         # header's messages at its right end, beside the buttons that cause them
         notes = pn.Column(*(self._note_pane(key) for key in HEADER_NOTES), sizing_mode="stretch_width",
                           margin=(5, 0, 0, 0), styles={"flex": "1 1 0", "min-width": "0", "overflow": "hidden"})
-        readout = pn.Row(self.readout, notes, height=26, sizing_mode="stretch_width", margin=0,
+        readout = pn.Row(self.readout, notes, self.pacer, height=26, sizing_mode="stretch_width", margin=0,
                          styles={"border-bottom": "1px solid #ddd", "background": "#f6f7f9", "overflow": "hidden"},
                          css_classes=["readout-row"])
         self.timeline_label = pn.pane.HTML("", width=220)
