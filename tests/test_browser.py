@@ -235,6 +235,24 @@ def test_a_refused_value_goes_back_to_the_value_in_effect_with_a_message_beside_
     wait_status(lab, lambda s: s["step"] > step)
 
 
+def test_a_number_of_disks_typed_stays_in_its_box_while_other_settings_change_until_applied(page, lab):
+    """N and the seed wait for their Apply button: a page refresh that shows another setting's new
+    value (here the damping, typed after N) leaves the N typed in its box, and Apply restarts with it."""
+    open_dashboard(page, lab, "ratchet16")
+    type_into(page, ".particles-input", "20")
+    damping = status(lab)["settings"]["damping_ratio"]
+    page.locator(".damping-slider .noUi-handle").focus()
+    page.keyboard.press("ArrowRight")
+    wait_status(lab, lambda s: s["settings"]["damping_ratio"] > damping)
+    expect(page.locator(".damping-slider").first).to_contain_text(f"{damping + 0.05:.2f}")  # that refresh drawn
+    expect(page.locator(".particles-input input")).to_have_value("20")
+    page.click(".apply-reset-button button")
+    wait_status(lab, lambda s: s["settings"]["particles"] == 20 and s["particles"] == 20)
+    page.click(".defaults-button button")
+    wait_status(lab, lambda s: s["settings"]["particles"] == 16 and s["settings"]["damping_ratio"] == damping)
+    expect(page.locator(".particles-input input")).to_have_value("16")
+
+
 def type_into(page, css: str, text: str) -> None:
     box = page.locator(f"{css} input")
     box.fill(text)

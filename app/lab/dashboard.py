@@ -86,6 +86,8 @@ if (navigator.clipboard) {
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
+RESTART_KEYS = ("particles", "seed")
+"""The settings typed first and applied by their own button, with a restart."""
 JOB_KINDS = ("save", "load", "handout", "record")
 """The file jobs, each shown beside its button while it runs (:mod:`granlab.app.lab.jobs`)."""
 PANES = ("Key plots", "More plots", "About", "Lesson", "Analysis")
@@ -143,6 +145,7 @@ class Dashboard:
         self._legend_key = None
         self._replay_shown = None
         self._settings_shown = None
+        self._restart_values_shown: dict[str, object] = {}
         self._pending_shown: set[str] = set()
         self.notes: dict[str, pn.pane.HTML] = {}
         self._note_shown: dict[str, float] = {}
@@ -378,6 +381,8 @@ class Dashboard:
         if self._syncing or self.viewer:
             return
         self._clear_errors()
+        if command in ("defaults", "preset", "reset"):
+            self._restart_values_shown = {}  # the settings in effect, N and seed too, back in every box
         self.engine.submit(command, **payload)
 
     def _clear_errors(self) -> None:
@@ -544,6 +549,7 @@ class Dashboard:
             self.lesson.object = lesson_pane(shown_as)
         self.pane_choice.value = PANES[0]
         self._show_pane()
+        self._restart_values_shown = {}
         self._sync(status)
         self._legend_key = None
 
@@ -565,6 +571,7 @@ class Dashboard:
             self.message_seq = message.seq
             self._note(message.control, message.level, message.text)
             if message.level == "error" and message.control in CONTROL_LABELS:
+                self._restart_values_shown.pop(message.control, None)
                 self._sync(status)
 
     def _show_pending(self, status: dict) -> None:
@@ -705,6 +712,10 @@ class Dashboard:
             if not settings or key not in settings:
                 continue
             value = math.inf if settings[key] == "inf" else settings[key]  # JSON carries inf as "inf"
+            if key in RESTART_KEYS:  # a value typed, waiting for its Apply button, stays until the run's own changes
+                if self._restart_values_shown.get(key) == value:
+                    continue
+                self._restart_values_shown[key] = value
             if widget is self.no_sliding:
                 widget.value = value == math.inf
             elif widget is self.friction:
