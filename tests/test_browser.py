@@ -476,6 +476,60 @@ def test_preset_switch_builds_its_plots_and_its_text(page, lab):
     expect(page.locator(".teaching h1")).to_contain_text("minimum sliding", timeout=10000)
 
 
+SWITCHES = ("elliptic", "block", "closed-path", "compression", "aggregation", "ratchet", "ratchet16",
+            "block", "elliptic", "compression", "closed-path", "ratchet", "aggregation", "ratchet16")
+"""From ratchet16, each preset entered from two others."""
+PAGE_PLOTS = """() => {
+  const out = {plots: {}}
+  for (const m of Bokeh.documents[0].all_models) {
+    if (m.sent !== undefined && m.drawn !== undefined) out.refresh = m.sent  // the pacer's
+    if (m.type !== "Figure" || !(m.name || "").startsWith("figure-") || !m.document) continue
+    const plot = out.plots[m.name.slice(7)] = {title: m.title.text, rows: 0, t0: null, labels: []}
+    for (const r of m.renderers) {
+      const source = r.data_source
+      if (!source || !source.name) continue  // the legend's placeholders
+      const data = source.data, n = (data[Object.keys(data)[0]] || []).length
+      plot.rows += n
+      if (source.name.startsWith("series-") && data.t && n) plot.t0 = data.t[0]
+      if (data.label) plot.labels = [...new Set(data.label)]
+    }
+  }
+  return out
+}"""
+
+
+def test_a_preset_switch_is_a_clean_slate_on_a_busy_machine(page, lab):
+    """Every preset entered from two others, with two busy processes beside the lab: from the first
+    refresh made after the switch, its key plots' time series start at t = 0, and a cone plot names
+    only the contacts the preset watches and the μ in effect."""
+    open_dashboard(page, lab, "ratchet16")
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        for name in SWITCHES:
+            choose_preset(page, lab, name)
+            # the refresh after the next is made after the status said the new preset: every one from it on shows it
+            first = page.evaluate(PAGE_PLOTS)["refresh"] + 2
+            deadline, seen = time.time() + 3, 0
+            while time.time() < deadline or seen < 2:
+                shown = page.evaluate(PAGE_PLOTS)
+                s = status(lab)
+                if shown["refresh"] < first:
+                    continue
+                seen += 1
+                friction = s["settings"].get("friction")
+                mu = "∞" if friction == "inf" else f"{friction:g}"
+                for plot in PRESETS[name].key_plots:  # the plots the page shows after a switch
+                    drawn = shown["plots"][plot]
+                    where = f"{name}, plot {plot}: {drawn}"
+                    assert drawn["t0"] in (None, 0), where
+                    if plot.endswith("cone"):
+                        assert f"μ = {mu}" in drawn["title"], where
+                        assert set(drawn["labels"]) <= set(s["watched_labels"]), f"{where}; {s['watched_labels']}"
+    finally:
+        for process in busy:
+            process.kill()
+
+
 def test_save_then_replay_with_a_timeline(page, lab):
     open_dashboard(page, lab, "ratchet16")
     wait_status(lab, lambda s: s["preset"] == "ratchet16" and s["cycle"] >= 2, timeout=90)  # contacts watched

@@ -84,6 +84,20 @@ def test_series_buffer_serves_each_reader_what_it_has_not_seen():
     assert reset and lists(columns) == {"t": [], "y": []}
 
 
+def test_rows_and_status_name_the_run_they_belong_to(engine):
+    """A page draws rows only with a status of the same run: a switch's rows never meet the last
+    preset's labels (the switch resets the buffers before the status says the new preset)."""
+    run = engine.status()["run"]
+    cursor, _, _ = engine.series("contacts", Cursor())
+    assert cursor.run == run
+    engine.submit("preset", name="block")
+    wait(lambda: engine.status()["preset"] == "block")
+    assert engine.status()["run"] == run + 1
+    assert engine.series("contacts", cursor)[0].run == engine.series("block", Cursor())[0].run == run + 1
+    engine.submit("reset")
+    wait(lambda: engine.status()["run"] == run + 2)
+
+
 def test_a_control_reaches_the_engine_between_steps(engine):
     engine.submit("apply", changes={"damping_ratio": 0.45})
     wait(lambda: engine.status()["settings"]["damping_ratio"] == 0.45, timeout=5.0)

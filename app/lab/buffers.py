@@ -18,10 +18,12 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Cursor:
-    """Where a reader stands: the generation it read and the last sequence number it got."""
+    """Where a reader stands: the generation it read and the last sequence number it got; ``run``,
+    the run (preset, restart or replay) whose rows the buffer held then."""
 
     generation: int = -1
     seq: int = 0
+    run: int = 0
 
 
 class SeriesBuffer:
@@ -33,6 +35,7 @@ class SeriesBuffer:
         self._data = np.zeros((self.capacity, len(self.columns)))
         self._seq = 0
         self._generation = 0
+        self._run = 0
         self._lock = threading.Lock()
 
     def extend(self, rows) -> None:
@@ -46,11 +49,12 @@ class SeriesBuffer:
             self._data[:len(block) - first] = block[first:]
             self._seq += len(block)
 
-    def reset(self, columns: tuple[str, ...] | None = None) -> None:
-        """Drop every row and start a new generation (optionally with other columns)."""
+    def reset(self, columns: tuple[str, ...] | None = None, run: int | None = None) -> None:
+        """Drop every row and start a new generation (optionally with other columns, for another ``run``)."""
         with self._lock:
             self._seq = 0
             self._generation += 1
+            self._run = self._run if run is None else run
             if columns is not None and tuple(columns) != self.columns:
                 self.columns = tuple(columns)
                 self._data = np.zeros((self.capacity, len(self.columns)))
@@ -69,7 +73,7 @@ class SeriesBuffer:
         with self._lock:
             reset = cursor.generation != self._generation
             rows = self._rows_after(0 if reset else cursor.seq)
-            new = Cursor(self._generation, self._seq)
+            new = Cursor(self._generation, self._seq, self._run)
             names = self.columns
         return new, reset, dict(zip(names, rows.T.copy()))
 

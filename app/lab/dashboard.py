@@ -423,16 +423,18 @@ class Dashboard:
 
     # ------------------------------------------------------------------ plots
     def _use_plots(self, names: list[str], time_label: str, columns: dict, reference_cycle: int = 0) -> None:
-        """Show the plots ``names`` (made once per tab and time axis, emptied for the new source)."""
+        """Show the plots ``names`` (made once per tab and time axis, emptied for the new source; the
+        others emptied too, so that none holds another run's rows when it is shown again)."""
         self.cursors = {}
         self.shown = []
+        for plot in self.plots.values():
+            plot.clear()
         for name in names:
             key = (name, time_label, tuple(sorted((k, tuple(v)) for k, v in columns.items())), reference_cycle)
             plot = self.plots.get(key)
             if plot is None:  # a plot of the same name may read other columns in another preset
                 plot = self.plots[key] = make_plot(name, time_label, columns, reference_cycle)
                 plot.set_projector(self.projector.value)
-            plot.clear()
             for series in plot.reads:
                 self.cursors[series] = Cursor()
             self.shown.append(plot)
@@ -555,7 +557,10 @@ class Dashboard:
 
     def _pull(self, status: dict) -> None:
         for series, cursor in list(self.cursors.items()):
-            self.cursors[series], reset, columns = self.engine.series(series, cursor)
+            now, reset, columns = self.engine.series(series, cursor)
+            if now.run != status.get("run"):  # rows of a run the status is not yet (or no longer) about
+                continue
+            self.cursors[series] = now
             if not reset and not (columns and len(next(iter(columns.values())))):
                 continue
             for plot in self.shown:

@@ -109,6 +109,8 @@ class LabEngine:
         self.commands: queue.Queue = queue.Queue()
         self.messages = MessageLog()
         self.buffers: dict[str, SeriesBuffer] = {}
+        self.run = 0
+        """The number of the run shown (a preset, a restart, a replay): the buffers' rows and the status carry it."""
         self._lock = threading.Lock()
         self._frame = None
         self._frame_seq = 0
@@ -386,6 +388,7 @@ class LabEngine:
         self._history_bytes = 0
         self._rate.clear()
         self.error = ""
+        self.run += 1
         self._reset_buffers()
         if isinstance(source, Preset):
             source.on_frame = self._remember
@@ -401,9 +404,9 @@ class LabEngine:
         for name, columns in series.items():
             if name not in self.buffers:
                 self.buffers[name] = SeriesBuffer(columns, SERIES_CAPACITY.get(name, 40000))
-            self.buffers[name].reset(columns)
+            self.buffers[name].reset(columns, run=self.run)
         for name in self.buffers.keys() - series.keys():
-            self.buffers[name].reset()
+            self.buffers[name].reset(run=self.run)
 
     def _reanchor(self) -> None:
         """Pace from now on: simulated time advances at the chosen speed from the current state."""
@@ -547,7 +550,7 @@ class LabEngine:
         if self._stepping is not None:
             interval = self._stepping - self._step_from
             status["step_progress"] = (self._time() - self._step_from) / interval if interval > 0 else 1.0
-        status.update(state=state, error=self.error, paused_for=self.paused_for,
+        status.update(state=state, run=self.run, error=self.error, paused_for=self.paused_for,
                       steps_per_s=sum(r[2] for r in self._rate) / seconds if seconds else 0.0,
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
                       speed_achieved=simulated / span / status["cycle_time"] if span > 0 and self.running else 0.0,

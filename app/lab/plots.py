@@ -166,6 +166,7 @@ class LivePlot:
     def __init__(self, name: str, fig):
         self.name = name
         self.figure = fig
+        self.title = fig.title.text
         self.sources: list[ColumnDataSource] = []
         self.pane = pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=PLOT_HEIGHT, margin=(0, 4, 4, 0))
         self._base_widths: dict = {}
@@ -174,10 +175,12 @@ class LivePlot:
         set_projector(self.figure, on, self._base_widths)
 
     def clear(self) -> None:
-        """Empty the sources of the data (a new preset, a reset, a replay's jump back); the
-        legend's placeholders stay."""
+        """Empty the sources of the data (a new preset, a reset, a replay's jump back) and put back
+        the title that says what the plot shows (not what the last run made of it); the legend's
+        placeholders stay."""
         for source in self.sources:
             source.data = _empty(source.data)
+        self.figure.title.text = self.title
 
     def feed(self, series: str, columns: dict, reset: bool, status: dict) -> None:
         """New rows of ``series`` (columns of lists); ``reset``: they replace what was shown."""
@@ -467,18 +470,17 @@ class ConePlot(LivePlot):
         mu = math.inf if isinstance(friction, str) else float(friction)
         f0 = float(settings.get("cohesion_force", 0.0) or 0.0)
         key = (mu, f0, round(self.top, 12))
-        if key == self._cone_key or self.top <= 0.0:
+        if key == self._cone_key:
             return
         self._cone_key = key
         for item in self.friction_items:
             item.visible = not math.isinf(mu)
-        if math.isinf(mu):
+        self.figure.title.text = self.title + (" — μ = ∞, no cone" if math.isinf(mu) else f" — μ = {mu:g}")
+        if math.isinf(mu) or self.top <= 0.0:  # no cone, or no force yet to draw it to
             self.cone.data = {"x": [], "y": []}
-            self.figure.title.text = self.figure.title.text.split(" — ")[0] + " — μ = ∞, no cone"
             return
         top = 1.1 * self.top
         self.cone.data = {"x": [top, -f0, top], "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
-        self.figure.title.text = self.figure.title.text.split(" — ")[0] + f" — μ = {mu:g}"
 
 
 def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0) -> LivePlot:
