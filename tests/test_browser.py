@@ -135,6 +135,12 @@ def test_the_lab_waits_for_its_first_tab_and_starts_the_preset_at_t0(page, lab):
     open_dashboard(page, lab)
     s = wait_status(lab, lambda s: s["state"] == "running" and s["step"] > 0)
     assert s["tabs"] >= 1 and s["time"] < 30.0
+    # the key plots are empty while the box is compressed: the page says what they wait for
+    try:
+        expect(page.locator(".plots-waiting")).to_contain_text("the load–strain loop starts with cycling. Now: "
+                                                               "compressing", timeout=15000)
+    except AssertionError:
+        assert status(lab)["stage"] != "compressing"  # (only if the compression ended first)
 
 
 def test_the_page_asks_nothing_of_other_hosts_and_logs_no_error_with_the_scene_on(page, lab):

@@ -38,7 +38,7 @@ from .keyboard import Keyboard
 from .live import UPDATE_SECONDS, LiveText, describe
 from .pace import DRAW_WAIT_SECONDS, Pacer
 from ..media.drawing import COLOR_FIELDS, legend_html
-from .plots import AnalysisFigures, compact, make_plot
+from .plots import WAITS, AnalysisFigures, compact, make_plot
 
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
@@ -156,6 +156,8 @@ class Dashboard:
                                                        sizing_mode="stretch_width")
         self.pane_choice.param.watch(lambda e: self._show_pane(), "value")
         self.right = pn.Column(sizing_mode="stretch_both", styles={"flex": "1 1 0"})
+        self.waiting = pn.pane.HTML("", visible=False, sizing_mode="stretch_width", css_classes=["plots-waiting"],
+                                    margin=(2, 10))
         self.teaching = pn.pane.Markdown("", sizing_mode="stretch_width", css_classes=["teaching"])
         self.about = pn.Column(self.teaching, sizing_mode="stretch_both", scroll=True)
         self.lesson = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["lesson"])
@@ -449,7 +451,7 @@ class Dashboard:
         plots = self.shown
         keys = [p for p in plots if p.name in self.key_names] or plots[:2]
         if choice == "Key plots":
-            self.right.objects = [self.pane_choice, self._plot_column([p.pane for p in keys])]
+            self.right.objects = [self.pane_choice, self.waiting, self._plot_column([p.pane for p in keys])]
         elif choice == "More plots":
             others = [p.pane for p in plots if p not in keys]
             self.right.objects = [self.pane_choice, self._plot_column(others) if others else
@@ -517,6 +519,7 @@ class Dashboard:
             self.preset_shown = preset
             self._new_source(status, shown_as)
         self._pull(status)
+        self._say_what_plots_wait_for(status)
         self._expire_notes()
         self._messages(status)
         settings_key = repr((status.get("settings"), status.get("pending")))
@@ -568,6 +571,18 @@ class Dashboard:
                     plot.feed(series, columns, reset, status)
         for plot in self.shown:
             plot.refresh(status)
+
+    def _say_what_plots_wait_for(self, status: dict) -> None:
+        """Above the key plots, while any is empty: what it waits for, and what the run does now."""
+        empty = [plot for plot in self.shown if plot.name in self.key_names and plot.empty()]
+        text = " ".join(f"<b>{escape(plot.title)}</b>: "
+                        f"{escape(WAITS.get(plot.name, 'waiting for its first samples'))}." for plot in empty)
+        if text and status.get("stage"):
+            text += (f" Now: <i>{escape(status['stage'])}</i>, {escape(status.get('time_label', 't'))} = "
+                     f"{compact(status.get('time', 0.0))}.")
+        if text:
+            self.waiting.object = f"<div style='font-size:13px;color:#8a5a00;line-height:1.3'>{text}</div>"
+        self.waiting.visible = bool(text)
 
     def _messages(self, status: dict) -> None:
         """Each new message next to the control that caused it; a refused setting goes back to

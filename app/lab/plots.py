@@ -174,6 +174,10 @@ class LivePlot:
     def set_projector(self, on: bool) -> None:
         set_projector(self.figure, on, self._base_widths)
 
+    def empty(self) -> bool:
+        """Whether the plot has nothing to draw yet."""
+        return all(len(next(iter(source.data.values()), ())) == 0 for source in self.sources)
+
     def clear(self) -> None:
         """Empty the sources of the data (a new preset, a reset, a replay's jump back) and put back
         the title that says what the plot shows (not what the last run made of it); the legend's
@@ -481,6 +485,12 @@ class ConePlot(LivePlot):
             return
         top = 1.1 * self.top
         self.cone.data = {"x": [top, -f0, top], "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
+
+
+WAITS = {"strain-per-cycle": "its first point comes with the reference cycle, once the box is cycled",
+         "q-gamma": "the load–strain loop starts with cycling",
+         "coulomb-cone": "its contacts are chosen, and watched, from the first load cycle"}
+"""What an empty plot waits for, said above the key plots until it draws (a plot not named here: its first samples)."""
 
 
 def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0) -> LivePlot:
