@@ -259,6 +259,29 @@ def test_a_number_of_disks_typed_stays_in_its_box_while_other_settings_change_un
     expect(page.locator(".particles-input input")).to_have_value("16")
 
 
+def test_at_1366_by_768_the_controls_column_says_it_scrolls_and_no_control_is_cut(page, lab):
+    """A laptop's screen is too short for the whole column: a line at its foot says more lies below
+    (gone at the end); each control, scrolled to, lies whole inside the column."""
+    page.set_viewport_size({"width": 1366, "height": 768})
+    open_dashboard(page, lab, "ratchet16")
+    column = page.locator(".controls")
+    assert column.evaluate("e => e.scrollHeight > e.clientHeight + 50")
+    cue = page.locator(".more-below")
+    expect(cue).to_contain_text("more controls below")
+    box, shown = column.bounding_box(), cue.bounding_box()
+    assert box["y"] + box["height"] - 40 <= shown["y"] and shown["y"] + shown["height"] <= box["y"] + box["height"] + 1
+    assert cue.evaluate("e => getComputedStyle(e).opacity") == "1"
+    controls = column.locator("input:visible, select:visible, button:visible, .noUi-handle:visible")
+    assert controls.count() >= 20
+    for k in range(controls.count()):
+        control = controls.nth(k)
+        control.scroll_into_view_if_needed()
+        where = control.bounding_box()
+        assert box["x"] <= where["x"] and where["x"] + where["width"] <= box["x"] + box["width"], control
+        assert box["y"] <= where["y"] and where["y"] + where["height"] <= box["y"] + box["height"] + 1, control
+    assert cue.evaluate("e => getComputedStyle(e).opacity") == "0"  # the end of the column: nothing more below
+
+
 def type_into(page, css: str, text: str) -> None:
     box = page.locator(f"{css} input")
     box.fill(text)

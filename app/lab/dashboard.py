@@ -69,6 +69,17 @@ NARROW_BODY_CSS = NARROW + """ {
   .centre { width: auto !important; min-width: 0 !important; height: 60vh !important; flex: none !important; }
   .right { width: auto !important; height: 90vh !important; flex: none !important; }
 }"""
+CONTROLS_SCROLL_CSS = """:host { overflow-y: scroll !important; scrollbar-color: #8a8f98 #eceef1; scrollbar-width: auto; }
+:host::-webkit-scrollbar { width: 12px; } :host::-webkit-scrollbar-thumb { background: #8a8f98; border-radius: 6px; }
+:host::-webkit-scrollbar-track { background: #eceef1; }"""
+"""The controls column's scroll bar always drawn, wide and grey: a screen too short for the column shows it scrolls."""
+MORE_BELOW = "<div class='cue'>▼ more controls below: scroll</div>"
+MORE_BELOW_CSS = """:host { position: sticky !important; bottom: 0; z-index: 2;
+  animation: more-below linear both; animation-timeline: scroll(nearest); }
+@keyframes more-below { 0%, 92% { opacity: 1; } 100% { opacity: 0; } }
+.cue { font-size: 13px; color: #fff; background: rgba(60, 64, 72, 0.88); padding: 4px 10px; text-align: center; }"""
+"""A line at the foot of the controls column while more of it lies below (it fades out at the end of the
+column where the browser ties animations to scrolling; elsewhere it stays)."""
 FRICTION_SLIDER_END = 1.0
 SPEED_NAMES = ("slow", "normal", "fast")
 """Each preset's named speeds (:attr:`granlab.engine.protocols.presets.Preset.speeds`), on buttons beside the slider."""
@@ -796,8 +807,11 @@ class Dashboard:
             for widget in (self.preset, self.play, self.step, self.reset, self.apply_reset, self.color,
                            self.watch, self.watch_button, self.analysis_kind, self.analysis_button, self.timeline):
                 widget.disabled = True
-        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, self.link_query, self.live,
-                            width=250, sizing_mode="stretch_height", scroll=True, css_classes=["controls"])
+        more = pn.pane.HTML(MORE_BELOW, css_classes=["more-below"], sizing_mode="stretch_width", margin=0,
+                            stylesheets=[MORE_BELOW_CSS])
+        sidebar = pn.Column(self.no_controls, loading, contacts, sample, view, files, self.link_query, self.live, more,
+                            width=250, sizing_mode="stretch_height", scroll=True, css_classes=["controls"],
+                            stylesheets=[CONTROLS_SCROLL_CSS])
         title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
                  "runs it</div>" if self.viewer else "GranLab")
         # only what this tab shows: a hidden widget in a row still widens it
