@@ -103,9 +103,23 @@ def wait_model(page, name: str, condition: str, timeout=60000):
                            f" return m !== null && ({condition}); }}", polling=200, timeout=timeout)
 
 
+PAGE_REFRESH = ("[...Bokeh.documents[0].all_models].find(m => m.sent !== undefined && m.drawn !== undefined)"
+                ".drawn")
+"""The number of the last refresh the page drew (app/lab/pace.py)."""
+
+
+def page_caught_up(page) -> None:
+    """Wait until the page has drawn a refresh made after this call: the refresh after the next one
+    (the next may have been made before, and be on its way)."""
+    after = page.evaluate(f"() => {PAGE_REFRESH}") + 2
+    page.wait_for_function(f"() => {PAGE_REFRESH} >= {after}", polling=100, timeout=60000)
+
+
 def choose_preset(page, lab, name: str):
+    """Choose ``name`` in the page and wait until the page shows it (its plots, text and panes)."""
     page.select_option(".preset-select select", label=PRESETS[name].menu_name)
     wait_status(lab, lambda s: s["preset"] == name)
+    page_caught_up(page)
 
 
 def set_speed(page, lab, label: str):
@@ -511,7 +525,6 @@ SWITCHES = ("elliptic", "block", "closed-path", "compression", "aggregation", "r
 PAGE_PLOTS = """() => {
   const out = {plots: {}}
   for (const m of Bokeh.documents[0].all_models) {
-    if (m.sent !== undefined && m.drawn !== undefined) out.refresh = m.sent  // the pacer's
     if (m.type !== "Figure" || !(m.name || "").startsWith("figure-") || !m.document) continue
     const plot = out.plots[m.name.slice(7)] = {title: m.title.text, rows: 0, t0: null, labels: []}
     for (const r of m.renderers) {
@@ -535,16 +548,11 @@ def test_a_preset_switch_is_a_clean_slate_on_a_busy_machine(page, lab):
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
         for name in SWITCHES:
-            choose_preset(page, lab, name)
-            # the refresh after the next is made after the status said the new preset: every one from it on shows it
-            first = page.evaluate(PAGE_PLOTS)["refresh"] + 2
-            deadline, seen = time.time() + 3, 0
-            while time.time() < deadline or seen < 2:
+            choose_preset(page, lab, name)  # returns once the page drew a refresh made after the switch
+            deadline = time.time() + 3
+            while time.time() < deadline:  # each refresh from then on shows the new preset only
                 shown = page.evaluate(PAGE_PLOTS)
                 s = status(lab)
-                if shown["refresh"] < first:
-                    continue
-                seen += 1
                 friction = s["settings"].get("friction")
                 mu = "∞" if friction == "inf" else f"{friction:g}"
                 for plot in PRESETS[name].key_plots:  # the plots the page shows after a switch
