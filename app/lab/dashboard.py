@@ -4,7 +4,8 @@ A header with the preset, play/pause/step/restart, the speed in the preset's clo
 readout strip; below it the controls on the left (each with its own message line), the 3D
 scene with its legend (and a timeline during a replay) in the middle, and on the right the two
 plots the preset is about, with the other plots, the preset's explanation and the Analysis tab
-one click away. Nothing needs scrolling at 1920×1080 or 1366×768.
+one click away. The controls column scrolls where the screen is too short for it (a line at its
+foot says so, 1366×768 included); nothing else needs scrolling at 1920×1080 or 1366×768.
 
 Every tab builds its own widgets, bokeh figures and sources (bokeh models cannot be shared
 between sessions) and pulls, every 200 ms (a viewer's every second), the rows it has not seen from
@@ -394,7 +395,7 @@ class Dashboard:
         if self._syncing or self.viewer:
             return
         self._clear_errors()
-        if command in ("defaults", "preset", "reset"):
+        if command in ("defaults", "reset"):  # (a preset switch: _new_source)
             self._restart_values_shown = {}  # the settings in effect, N and seed too, back in every box
         self.engine.submit(command, **payload)
 
