@@ -127,14 +127,16 @@ def set_speed(page, lab, label: str):
     from granlab.app.lab.dashboard import SPEEDS
 
     handle = page.locator(".speed-slider .noUi-handle")
-    handle.focus()
     target = list(SPEEDS).index(label)
-    for _ in range(len(SPEEDS)):
+    deadline = time.time() + 60
+    while time.time() < deadline:
         current = list(SPEEDS).index(next(k for k, v in SPEEDS.items() if v == speed_in(status(lab))))
         if current == target:
             return
-        page.keyboard.press("ArrowRight" if current < target else "ArrowLeft")
-        time.sleep(0.4)
+        if float(handle.get_attribute("aria-valuenow")) == current:  # the last key is in effect: the next one
+            handle.focus()
+            page.keyboard.press("ArrowRight" if current < target else "ArrowLeft")
+        time.sleep(0.2)
     raise AssertionError(f"the speed never reached {label}")
 
 
