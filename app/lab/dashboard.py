@@ -98,6 +98,8 @@ if (navigator.clipboard) {
 SPEEDS = {"0.05": 0.05, "0.1": 0.1, "0.2": 0.2, "0.5": 0.5, "1": 1.0, "2": 2.0, "5": 5.0, "10": 10.0, "20": 20.0,
           "50": 50.0, "max": math.inf}
 """Speeds offered, in the preset's clock units per second of wall clock ("max": as fast as it can)."""
+ASKED_SECONDS = 10.0
+"""How long a widget keeps a value its page asked for while the engine has not answered (then: the value in effect)."""
 RESTART_KEYS = ("particles", "seed")
 """The settings typed first and applied by their own button, with a restart."""
 JOB_KINDS = ("save", "load", "handout", "record")
@@ -158,6 +160,7 @@ class Dashboard:
         self._replay_shown = None
         self._settings_shown = None
         self._restart_values_shown: dict[str, object] = {}
+        self._asked: dict[str, tuple[object, float]] = {}
         self._pending_shown: set[str] = set()
         self.notes: dict[str, pn.pane.HTML] = {}
         self._note_shown: dict[str, float] = {}
@@ -362,7 +365,24 @@ class Dashboard:
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
 
     def _control(self, key: str, value) -> None:
+        if self._syncing or self.viewer:
+            return
+        self._asked[key] = (value, time.monotonic())
         self._command("apply", changes={key: value})
+
+    def _asked_for(self, key: str, in_effect, pending: dict) -> bool:
+        """Whether this page asked for another value of ``key`` that the engine has yet to answer
+        (apply it, keep it for later, or refuse it): its widget keeps the value asked meanwhile, so a
+        refresh with a status from before the change never puts the old value back (and sends it)."""
+        if key not in self._asked:
+            return False
+        value, at = self._asked[key]
+        waiting = pending.get(key)
+        if in_effect == value or (math.inf if waiting == "inf" else waiting) == value \
+                or time.monotonic() - at > ASKED_SECONDS:
+            del self._asked[key]
+            return False
+        return True
 
     def _friction_in_effect(self, in_effect: bool, locked: bool = False) -> None:
         """With μ = ∞ the slider's value is not in effect: it is disabled and says so (``locked``:
@@ -604,6 +624,7 @@ class Dashboard:
             self._note(message.control, message.level, message.text)
             if message.level == "error" and message.control in CONTROL_LABELS:
                 self._restart_values_shown.pop(message.control, None)
+                self._asked.pop(message.control, None)
                 self._sync(status)
 
     def _show_pending(self, status: dict) -> None:
@@ -733,8 +754,9 @@ class Dashboard:
         else:
             self.preset.options = PRESET_OPTIONS
             self.preset.value = status["preset"]
+        pending = status.get("pending") or {}
         speed = status.get("speed") if replay is not None else (settings or {}).get("speed")
-        if speed is not None:
+        if speed is not None and not self._asked_for("speed", math.inf if speed == "inf" else speed, pending):
             self.speed.value = SPEEDS[_speed_label(speed)]
         cls = PRESETS.get(replay["of"] if replay else status["preset"])
         used = set(cls.controls) if cls else set()
@@ -744,6 +766,8 @@ class Dashboard:
             if not settings or key not in settings:
                 continue
             value = math.inf if settings[key] == "inf" else settings[key]  # JSON carries inf as "inf"
+            if self._asked_for(key, value, pending):
+                continue
             if key in RESTART_KEYS:  # a value typed, waiting for its Apply button, stays until the run's own changes
                 if self._restart_values_shown.get(key) == value:
                     continue
