@@ -14,7 +14,8 @@ from granlab.app.lab import lessons
 from granlab.app.lab.dashboard import SPEEDS
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
-from tests.test_browser import http_status, lab_only, open_dashboard, scene, status, wait_model, wait_status
+from tests.test_browser import (PAGE_REFRESH, http_status, lab_only, open_dashboard, scene, status, wait_model,
+                                wait_status)
 
 
 @pytest.fixture(scope="module")
@@ -129,14 +130,14 @@ def test_the_lesson_pane_shows_the_presets_sheet_and_its_page_to_print(page, lab
 
 
 HEADER = ("preset-select", "play-button", "step-button", "reset-button", "defaults-button", "speed-slider",
-          "speed-slow", "speed-normal", "speed-fast", "copy-link-button", "keys")
+          "speed-slow", "speed-normal", "speed-fast", "copy-link-button", "keys", "preferences")
 SIDEBAR = (("phase", "phase-slider"), ("amplitude", "amplitude-input"), ("pressure", "pressure-input"),
            ("period", "period-input"), ("fit", "fit-now-button"), ("friction", "friction-slider"),
            ("friction", "friction-infinite"), ("tangential_model", "model-select"), ("damping_ratio", "damping-slider"),
            ("rolling_friction", "rolling-friction-input"), ("rolling_stiffness", "rolling-stiffness-input"),
            ("cohesion_force", "cohesion-force-input"), ("cohesion_range", "cohesion-range-input"),
            ("particles", "particles-input"), ("seed", "seed-input"), ("particles", "apply-reset-button"))
-FILES = ("projector-toggle", "color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button",
+FILES = ("color-select", "watch-input", "watch-button", "frames-input", "save-name", "save-button",
          "load-select", "load-button", "handout-button", "record-name", "record-seconds", "record-button", "pane-choice")
 KNOWN = set(HEADER) | {css for _, css in SIDEBAR} | set(FILES)
 FOCUSED = """() => {
@@ -394,10 +395,10 @@ def test_the_live_text_says_the_state_every_few_seconds_and_alerts_a_restart(pag
     expect(page.locator(".live-text [role=alert]")).to_contain_text("starts from t = 0", timeout=10000)
 
 
-def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and_lines_thick(page, lab):
+def test_the_projector_profile_from_the_address_or_the_preferences_makes_text_large_and_lines_thick(page, lab):
     open_dashboard(page, lab, "ratchet16")
     page.goto(lab["url"] + "?preset=ratchet16&profile=projector")
-    toggle = page.locator(".projector-toggle input")
+    toggle = page.locator(".prefs-projector")
     expect(toggle).to_be_checked(timeout=60000)
     # each figure's change may come in a message of its own: every one is waited for, none read once
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
@@ -408,7 +409,10 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     thin, thick = f"{widths} == '[1.5,2,1,1,1]'", f"{widths} == '[3,4,2,2,2]'"
     wait_model(page, "figure-coulomb-cone", thick)
     expect(page.locator(".link-query input")).to_have_value(re.compile('"profile": "projector"'))  # next refresh
-    toggle.focus()
+    page.locator(".prefs-button").focus()
+    page.keyboard.press("Enter")  # the dialog opens on its first choice: projector mode
+    expect(page.get_by_role("dialog", name="Preferences")).to_be_visible()
+    expect(toggle).to_be_focused()
     page.keyboard.press("Space")  # off, from the keyboard
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '14px'")
     wait_model(page, "figure-coulomb-cone", thin)
@@ -416,6 +420,86 @@ def test_the_projector_profile_from_the_address_or_the_page_makes_text_large_and
     page.keyboard.press("Space")  # on again
     wait_model(page, "figure-coulomb-cone", thick)
     wait_model(page, "figure-strain-per-cycle", "m.title.text_font_size == '17px'")
+    page.keyboard.press("Escape")
+    expect(page.get_by_role("dialog", name="Preferences")).to_be_hidden()
+    expect(page.locator(".prefs-button")).to_be_focused()  # back where the keyboard was
+
+
+def tab_to(page, css: str, presses: int = 40) -> None:
+    """Press Tab until the control of class ``css`` has the keyboard (fails after ``presses``)."""
+    for _ in range(presses):
+        page.keyboard.press("Tab")
+        if css in page.evaluate(FOCUSED)["classes"]:
+            return
+    raise AssertionError(f"{presses} presses of Tab did not reach .{css}")
+
+
+KEYBOARD_MODEL = "[...Bokeh.documents[0].all_models].find(m => m.single_keys !== undefined && m.enabled !== undefined)"
+
+
+def test_keyboard_help_and_preferences_are_buttons_that_tab_and_screen_readers_reach(browser, lab):
+    """A screen reader takes the ? key for itself: the keys' list is a button named "keyboard help",
+    reached by Tab; the Preferences dialog turns the one-key shortcuts off (Space then pauses
+    nothing; the controls still act)."""
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    open_dashboard(page, lab, "ratchet16")
+    wait_status(lab, lambda s: s["state"] == "running")
+    help_button = page.get_by_role("button", name=re.compile("keyboard help"))
+    expect(help_button).to_have_count(1)
+    expect(page.get_by_role("button", name="Preferences")).to_have_count(1)
+    page.evaluate("() => document.activeElement.blur()")  # the keyboard at the top of the page
+    tab_to(page, "keys-button", presses=len(HEADER))
+    page.keyboard.press("Enter")
+    keys = page.get_by_role("dialog", name="Keys")
+    expect(keys).to_be_visible()
+    expect(keys).to_contain_text("one-key shortcuts off")
+    page.keyboard.press("Escape")
+    expect(keys).to_be_hidden()
+    expect(help_button).to_be_focused()
+    page.keyboard.press("Tab")
+    assert "prefs-button" in page.evaluate(FOCUSED)["classes"]
+    page.keyboard.press("Enter")
+    expect(page.get_by_role("dialog", name="Preferences")).to_be_visible()
+    tab_to(page, "prefs-single_keys", presses=3)
+    page.keyboard.press("Space")
+    expect(page.locator(".prefs-single_keys")).not_to_be_checked()
+    page.keyboard.press("Escape")
+    page.wait_for_function(f"() => {KEYBOARD_MODEL}.single_keys === false", polling=100, timeout=30000)
+    page.locator(".readout").click()
+    page.keyboard.press("Space")  # nothing; the box's value after it arrives after it
+    page.locator(".amplitude-input input").fill("0.25")
+    page.keyboard.press("Enter")
+    s = wait_status(lab, lambda s: 0.25 in (s["settings"]["amplitude"], s["pending"].get("amplitude")), timeout=60)
+    assert s["state"] == "running"
+    page.locator(".readout").click()
+    page.keyboard.press("?")
+    expect(keys).to_be_hidden()
+    page.close()
+
+
+def refreshes_in(page, seconds: float, count: str) -> int:
+    before = page.evaluate(f"() => {count}")
+    page.wait_for_timeout(seconds * 1000)
+    return page.evaluate(f"() => {count}") - before
+
+
+def test_reduced_motion_follows_the_system_and_redraws_every_two_seconds(browser, lab):
+    """With the system's reduced motion, the Preferences start with it on: the plots and readout
+    redraw every 2 s (still sampled in simulated time), and a viewer's 2D scene too."""
+    context = browser.new_context(viewport={"width": 1366, "height": 768}, reduced_motion="reduce")
+    page = context.new_page()
+    open_dashboard(page, lab, "ratchet16")
+    expect(page.locator(".prefs-reduced_motion")).to_be_checked(timeout=30000)
+    wait_status(lab, lambda s: s["state"] == "running")
+    page.wait_for_timeout(2500)  # a refresh that was on its way when the period changed
+    drawn = refreshes_in(page, 8.0, PAGE_REFRESH)
+    assert 2 <= drawn <= 5, drawn
+    scene_page = context.new_page()
+    lab_only(scene_page, lab)
+    scene_page.goto(lab["url"].split("?")[0] + "viewer-scene")
+    scene_page.wait_for_function("() => window.granlabScene && granlabScene.drawn > 0", polling=200, timeout=60000)
+    assert 2 <= refreshes_in(scene_page, 8.0, "granlabScene.drawn") <= 5
+    context.close()
 
 
 MECHANISM_PIXELS = """() => { const c = document.querySelector("canvas"), d = c.getContext("2d").getImageData(0, 0,

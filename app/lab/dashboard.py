@@ -38,6 +38,7 @@ from .buffers import Cursor
 from .keyboard import Keyboard
 from .live import UPDATE_SECONDS, LiveText, describe
 from .pace import DRAW_WAIT_SECONDS, Pacer
+from .preferences import CALM_SECONDS, Preferences
 from ..media.drawing import COLOR_FIELDS, legend_html
 from .plots import WAITS, AnalysisFigures, compact, make_plot
 
@@ -191,7 +192,7 @@ class Dashboard:
         for widget in {id(w): w for root in (self.page, self.analysis_view, self.right, self.pane_choice)
                        for w in root.select(pn.widgets.Widget)}.values():
             widget.stylesheets = [*widget.stylesheets, FOCUS_CSS]
-        self.projector.value = (query or {}).get("profile") == "projector"
+        self.preferences.projector = (query or {}).get("profile") == "projector"
         if not viewer:
             self._open_link(query or {})
         self._refresh()
@@ -226,20 +227,22 @@ class Dashboard:
         self.step = W.Button(name="Step", css_classes=["step-button"], width=56, margin=(12, 4, 5, 4))
         self.reset = W.Button(name="Restart", button_type="warning", css_classes=["reset-button"], width=76,
                               margin=(12, 4, 5, 4))
-        self.defaults = W.Button(name="Reset settings", css_classes=["defaults-button"], width=112,
+        self.defaults = W.Button(name="Reset settings", css_classes=["defaults-button"], width=106,
                                  margin=(12, 4, 5, 4))
         self.speed = W.DiscreteSlider(name="Speed", options=SPEEDS, value=1.0, css_classes=["speed-slider"],
-                                      width=170, margin=(2, 8, 5, 12))
-        self.named_speeds = {name: W.Button(name=name, css_classes=["named-speed", f"speed-{name}"], width=58,
+                                      width=150, margin=(2, 8, 5, 12))
+        self.named_speeds = {name: W.Button(name=name, css_classes=["named-speed", f"speed-{name}"], width=54,
                                             margin=(12, 1, 5, 1)) for name in SPEED_NAMES}
-        self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 8))
+        self.copy_link = W.Button(name="Copy link", css_classes=["copy-link-button"], width=84, margin=(12, 4, 5, 6))
         self.live = LiveText(css_classes=["live-text"], width=1, height=1, margin=0)
         self.pacer = Pacer(width=0, height=0, margin=0)
         self._sent_at = -math.inf
         self._live_said = -math.inf
         self._live_run: tuple[str, float] | None = None  # (preset, time) at the last refresh
-        self.keyboard = Keyboard(enabled=not self.viewer, css_classes=["keys"], width=80, height=31,
+        self.keyboard = Keyboard(enabled=not self.viewer, css_classes=["keys"], width=68, height=31,
                                  margin=(12, 4, 5, 4))
+        self.preferences = Preferences(css_classes=["preferences"], width=98, height=31, margin=(12, 4, 5, 4))
+        self._refreshes = None  # the page's periodic pull, once the page is served
         # the link's query, which the button's script reads in the page (the clipboard is the page's)
         self.link_query = W.TextInput(value="{}", visible=False, width=10, css_classes=["link-query"])
         # a viewer is shown the speed as text: panel draws a disabled DiscreteSlider with its handle
@@ -271,7 +274,6 @@ class Dashboard:
         self.cancel_pending = W.Button(name="Cancel the waiting changes", css_classes=["cancel-pending-button"],
                                        visible=False, **wide)
         self.fit_now = W.Button(name="Fit the strain from the next cycle", css_classes=["fit-now-button"], **wide)
-        self.projector = W.Checkbox(name="Projector: large text, thick lines", css_classes=["projector-toggle"])
         self.color = W.Select(name="Colour disks by", options=list(COLOR_FIELDS), value=self.scene.color_field,
                               css_classes=["color-select"], **wide)
         self.watch = W.TextInput(name="Watch a contact: disks i j (or click a disk)", placeholder="e.g. 3 7",
@@ -324,7 +326,9 @@ class Dashboard:
         self.apply_reset.on_click(lambda e: self._command("apply", changes={"particles": self.particles.value,
                                                                              "seed": self.seed.value}))
         self.color.param.watch(self._color, "value")
-        self.projector.param.watch(lambda e: self._set_projector(), "value")
+        self.preferences.param.watch(lambda e: self._set_projector(), "projector")
+        self.preferences.param.watch(lambda e: setattr(self.keyboard, "single_keys", e.new), "single_keys")
+        self.preferences.param.watch(lambda e: self._set_pace(), "reduced_motion")
         self.watch_button.on_click(self._watch)
         self.save.on_click(lambda e: self._command("save", name=self.save_name.value.strip()))
         self.load.on_click(lambda e: self._command("load", name=self.load_name.value or ""))
@@ -346,9 +350,19 @@ class Dashboard:
     def _set_projector(self) -> None:
         """This tab's profile: the projector's (large text, thick lines) or the screen's."""
         for plot in self.plots.values():
-            plot.set_projector(self.projector.value)
+            plot.set_projector(self.preferences.projector)
         self._legend_key = None
         self._settings_shown = None  # the link says the profile too
+
+    def _set_pace(self) -> None:
+        """This tab's refreshes: every :data:`CALM_SECONDS` in reduced motion, else the usual period."""
+        if self._refreshes is not None:
+            self._refreshes.period = self._refresh_period()
+
+    def _refresh_period(self) -> int:
+        if self.preferences.reduced_motion:
+            return int(CALM_SECONDS * 1000)
+        return VIEWER_REFRESH_MS if self.viewer else REFRESH_MS
 
     def _play_pause(self) -> None:
         """Pause a running simulation, play a paused one: as it is now, not as the button last showed it."""
@@ -468,7 +482,7 @@ class Dashboard:
             plot = self.plots.get(key)
             if plot is None:  # a plot of the same name may read other columns in another preset
                 plot = self.plots[key] = make_plot(name, time_label, columns, reference_cycle)
-                plot.set_projector(self.projector.value)
+                plot.set_projector(self.preferences.projector)
             for series in plot.reads:
                 self.cursors[series] = Cursor()
             self.shown.append(plot)
@@ -678,16 +692,16 @@ class Dashboard:
         if state == "running":
             parts.append(f"{status.get('steps_per_s', 0.0) / 1000.0:.3g} k steps/s")
         parts += [f"<span style='color:#8a5a00'>{escape(job)}</span>" for job in self._show_jobs(status.get("jobs", []))]
-        size = 16 if self.projector.value else 14  # 16 px: the most the strip's 26 px hold
+        size = 16 if self.preferences.projector else 14  # 16 px: the most the strip's 26 px hold
         self.readout.object = (f"<div style='font-size:{size}px;line-height:1.3;padding:2px 0 0 10px;"
                                "white-space:nowrap'>" + " · ".join(p for p in parts if p) + "</div>")
         scene = self.scene.state()
         key = (self.scene.color_field, tuple(status.get("watched_labels") or ()), scene.get("walls", 0) > 0,
-               scene.get("cell") is not None, scene.get("mechanism", False), self.projector.value)
+               scene.get("cell") is not None, scene.get("mechanism", False), self.preferences.projector)
         if key != self._legend_key:
             self._legend_key = key
             legend = legend_html(self.scene.color_field, list(key[1]), *key[2:5])
-            self.legend.object = f"<div style='zoom:1.2'>{legend}</div>" if self.projector.value else legend
+            self.legend.object = f"<div style='zoom:1.2'>{legend}</div>" if self.preferences.projector else legend
         self._show_replay(status)
 
     def _say(self, status: dict) -> None:
@@ -712,7 +726,7 @@ class Dashboard:
         for name, button in self.named_speeds.items():
             button.button_type = "primary" if speeds.get(name) == speed else "default"
         link = json.dumps({**(status.get("link") or {"preset": status.get("preset", "ratchet")}),
-                           **({"profile": "projector"} if self.projector.value else {})})
+                           **({"profile": "projector"} if self.preferences.projector else {})})
         if self.link_query.value != link:
             self.link_query.value = link
 
@@ -792,7 +806,7 @@ class Dashboard:
 
     # ------------------------------------------------------------------ layout
     def view(self):
-        pn.state.add_periodic_callback(self._refresh, period=VIEWER_REFRESH_MS if self.viewer else REFRESH_MS)
+        self._refreshes = pn.state.add_periodic_callback(self._refresh, period=self._refresh_period())
         return self.page
 
     def _layout(self):
@@ -817,7 +831,7 @@ class Dashboard:
                        sample: {"particles", "seed"}}
         self.no_controls = pn.pane.HTML("<i>This preset has no live controls: only its speed.</i>",
                                         sizing_mode="stretch_width")
-        view = pn.Column(pn.pane.HTML("<b>View</b>"), self.projector, self.color, self.watch, self.watch_button,
+        view = pn.Column(pn.pane.HTML("<b>View</b>"), self.color, self.watch, self.watch_button,
                          self._note_pane("watch"), sizing_mode="stretch_width")
         files = pn.Column(pn.pane.HTML("<b>Files</b> (in the lab's data folder)"),
                           *labelled(self.frames_kept, "frames_per_cycle"), self.save_name, self.save,
@@ -840,8 +854,9 @@ class Dashboard:
         title = ("GranLab<div class='viewer-badge' style='font-size:13px;font-weight:normal'>viewer: the presenter "
                  "runs it</div>" if self.viewer else "GranLab")
         # only what this tab shows: a hidden widget in a row still widens it
-        controls = ([self.speed_text, self.keyboard] if self.viewer else
-                    [self.defaults, self.speed, *self.named_speeds.values(), self.copy_link, self.keyboard])
+        controls = ([self.speed_text, self.keyboard, self.preferences] if self.viewer else
+                    [self.defaults, self.speed, *self.named_speeds.values(), self.copy_link, self.keyboard,
+                     self.preferences])
         header = pn.Row(pn.pane.HTML(f"<div style='font-size:22px;font-weight:bold;padding-top:8px'>{title}</div>",
                                      width=105 + 95 * self.viewer),
                         self.preset, self.play, self.step, self.reset, *controls,

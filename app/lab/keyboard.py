@@ -6,7 +6,8 @@ dashboard carries out as if its button had been pressed. Keys typed into a text 
 on a focused button or slider, keep their usual meaning (Space presses the focused button, the
 arrows move the focused slider). A focused slider of :data:`SLIDER_STEPS` moves by its normal
 step with the arrows, its fine step with Shift and its coarse step with PageUp/PageDown;
-Home/End take it to its ends (noUiSlider's own keys).
+Home/End take it to its ends (noUiSlider's own keys). The one-key shortcuts (Space, →, ?) can be
+turned off in the Preferences (:mod:`.preferences`); the button, reached by Tab, opens the list too.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ KEYS = (("Space", "play / pause"), ("→", "one step (a frame's worth of simulat
         ("?", "this list"), ("Tab / Shift+Tab", "the next / previous control"),
         ("Space or Enter", "press the focused button, tick the focused box"),
         ("← → on a slider", "move it (Shift: finer; PageUp/PageDown: coarser; Home/End: to its ends)"),
-        ("↑ ↓ on a menu", "choose the previous / next entry"), ("Esc", "close this list"))
+        ("↑ ↓ on a menu", "choose the previous / next entry"), ("Esc", "close this list"),
+        ("Preferences", "one-key shortcuts off: Space, → and ? do nothing; the buttons and Alt keys still act"))
 """Every key of the page and what it does, as the dialog lists them."""
 
 SLIDER_STEPS = {"phase-slider": (1.0, 5.0, 45.0), "friction-slider": (0.01, 0.05, 0.2),
@@ -38,7 +40,8 @@ window.__granlabKeys = (event) => {
   const typing = (tag === "INPUT" && !["checkbox", "radio", "button", "range"].includes(target.type))
                  || tag === "TEXTAREA" || tag === "SELECT" || target.isContentEditable
   if (typing || help.open) return
-  if (event.key === "?") { event.preventDefault(); help.showModal(); return }
+  const single = data.single_keys && !event.altKey && !event.ctrlKey && !event.metaKey
+  if (event.key === "?" && single) { event.preventDefault(); help.showModal(); return }
   const handle = target.classList && target.classList.contains("noUi-handle")
   if (handle) {
     const host = path.find((el) => el.classList && [...el.classList].some((name) => name in data.steps))
@@ -61,8 +64,8 @@ window.__granlabKeys = (event) => {
   const button = tag === "BUTTON" || tag === "INPUT" || tag === "A"
   const play = path.some((el) => el.classList && el.classList.contains("play-button"))
   // Space on Play/Pause too: a button clicks on Space's release, which may find it drawn anew
-  if (event.code === "Space" && (!button || play)) { event.preventDefault(); send("play-pause") }
-  else if (event.key === "ArrowRight" && !event.altKey && !button) { event.preventDefault(); send("step") }
+  if (event.code === "Space" && single && (!button || play)) { event.preventDefault(); send("play-pause") }
+  else if (event.key === "ArrowRight" && single && !button) { event.preventDefault(); send("step") }
   else if (event.altKey && event.code === "KeyR") {
     event.preventDefault()
     send(event.shiftKey ? "defaults" : "restart")
@@ -105,12 +108,14 @@ class Keyboard(ReactiveHTML):
 
     action = param.String(default="")
     enabled = param.Boolean(default=True)
+    single_keys = param.Boolean(default=True, doc="Space, → and ? act (the Preferences' one-key shortcuts)")
     steps = param.Dict(default=SLIDER_STEPS)
 
     _template = f"""
-<button id="open" class="keys-button" onclick="${{script('show')}}" title="The keys of this page (?)">Keys ?</button>
-<dialog id="dialog" class="keys-dialog" aria-labelledby="keys-title">
-  <h2 id="keys-title">Keys</h2>
+<button id="open" class="keys-button" onclick="${{script('show')}}" aria-haspopup="dialog"
+        aria-label="Keys ?: keyboard help" title="The keys of this page (?)">Keys ?</button>
+<dialog id="dialog" class="keys-dialog" aria-label="Keys">
+  <h2>Keys</h2>
   <table>{_rows()}</table>
   <button id="close" class="keys-close" onclick="${{script('hide')}}">Close</button>
 </dialog>
