@@ -229,6 +229,12 @@ def run_block(lab: Lab) -> None:
     block_until(40.0)
     sim = lab.preset.sim
     lab.step_done("block-double-period", rows=np.array(lab.series["block"]), x=float(sim.particles.position[0, 0]),
+                  friction_work=sim.energy().dissipated_sliding, period=lab.preset.settings.period)
+    lab.preset.apply(period=20.0, friction=0.25)
+    lab.restart()
+    block_until(20.0)
+    sim = lab.preset.sim
+    lab.step_done("block-half-friction", rows=np.array(lab.series["block"]), x=float(sim.particles.position[0, 0]),
                   friction_work=sim.energy().dissipated_sliding)
 
 
@@ -270,12 +276,12 @@ the scene (docs/performance.md), some 3 s a load cycle of 256 disks and 15 T₀ 
 
 
 # ------------------------------------------------------------------------------------ the sheets
-def test_every_preset_has_a_sheet_of_three_or_four_steps_each_with_a_check():
+def test_every_preset_has_a_sheet_of_three_to_five_steps_each_with_a_check():
     assert set(lesson_presets()) == set(PRESETS)
     for name in PRESETS:
         sheet = lesson(name)
         assert sheet is not None and sheet.preset == name and sheet.title and sheet.intro
-        assert 3 <= len(sheet.steps) <= 4, name
+        assert 3 <= len(sheet.steps) <= 5, name
         for step in sheet.steps:
             assert step.check in CHECKS, f"{name}: step {step.title!r} promises {step.check!r}, which no test checks"
             assert re.match(r"(ratcheting|quasi-rigidity|Gilabert) ", step.paper), step.paper
@@ -588,7 +594,7 @@ def test_block_stops_sliding_only_at_rest_at_0_29_mu_fn():
 def test_block_slower_load_same_thresholds_twice_as_fast_four_times_as_far():
     lab = run("block")
     seen, before = lab.seen["block-double-period"], lab.seen["block-stops-at-rest"]
-    assert lab.preset.settings.period == 40.0
+    assert seen["period"] == 40.0
     rows = seen["rows"]
     t, ratio, velocity = rows[:, 0], rows[:, 1], rows[:, 5]
     (start,), (stop,) = block_events(rows)
@@ -597,6 +603,25 @@ def test_block_slower_load_same_thresholds_twice_as_fast_four_times_as_far():
     assert velocity.max() == pytest.approx(1.67, abs=0.01)
     assert seen["x"] == pytest.approx(21.6, abs=0.1) and seen["x"] / before["x"] == pytest.approx(4.0, rel=0.01)
     assert seen["friction_work"] == pytest.approx(10.8, abs=0.05)
+
+
+@check("block-half-friction")
+def test_block_with_half_the_friction_matches_the_numbers_predicted_from_the_closed_form():
+    """The step's predictions, from the equation of motion while sliding (m dv/dt = (r − 1) μF_n):
+    the load at the start μF_n, the peak speed μF_n T / (12 m), the distance and friction's work
+    scaled from the step with μ = 0.5 by μ and μ²."""
+    lab = run("block")
+    seen, full = lab.seen["block-half-friction"], lab.seen["block-stops-at-rest"]
+    assert lab.preset.settings.friction == 0.25 and lab.preset.settings.period == 20.0
+    rows = seen["rows"]
+    t, ratio, normal, tangential, velocity = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 5]
+    (start,), (stop,) = block_events(rows)
+    assert ratio[start] * 0.25 * normal[start] == pytest.approx(0.25, abs=0.004)  # the load, in units of F_n
+    assert t[start] == pytest.approx(20.0 / 3.0, abs=0.15) and t[stop] == pytest.approx(18.1, abs=0.1)
+    assert velocity.max() == pytest.approx(0.25 * 20.0 / 12.0, rel=0.01)
+    assert t[velocity.argmax()] == pytest.approx(13.3, abs=0.15)
+    assert seen["x"] == pytest.approx(2.7, abs=0.03) and seen["x"] / full["x"] == pytest.approx(0.5, rel=0.01)
+    assert seen["friction_work"] / full["friction_work"] == pytest.approx(0.25, rel=0.01)
 
 
 # ------------------------------------------------------------------------------- aggregation
