@@ -30,6 +30,7 @@ READY = {
     "elliptic": lambda s: s.get("cycle", 0) >= 8,
     "closed-path": lambda s: s.get("loops", 0) >= 8,
     "block": lambda s: s["time"] >= 100.0,
+    "collision": lambda s: (s.get("readout") or {}).get("collisions", 0) >= 4,
     "aggregation": lambda s: s["time"] >= 300.0,
     "compression": lambda s: s["stage"] == "equilibrated" or s["time"] >= 200.0,
 }

@@ -238,6 +238,15 @@ def run_block(lab: Lab) -> None:
                   friction_work=sim.energy().dissipated_sliding)
 
 
+def run_collision(lab: Lab) -> None:
+    """Each step's ζ typed at a launch, while the disks approach: it acts at once; three collisions."""
+    for zeta, check_id in ((0.0, "collision-elastic"), (0.5, "collision-restitution-predicted"),
+                           (0.8, "collision-gilabert-damping")):
+        lab.preset.apply(damping_ratio=zeta)
+        lab.run_for(3 * lab.preset.cycle_time())
+        lab.step_done(check_id, collisions=np.array(lab.series["collisions"]), path=np.array(lab.series["collision"]))
+
+
 def run_aggregation(lab: Lab) -> None:
     lab.run(lambda p: p.sim.time >= 60.0)
     lab.step_done("aggregation-clusters-merge", rows=np.array(lab.series["time"]))
@@ -267,7 +276,7 @@ def run_compression(lab: Lab) -> None:
 
 
 RUNS = {"ratchet": run_ratchet, "ratchet16": run_ratchet16, "elliptic": run_elliptic, "closed-path": run_closed_path,
-        "block": run_block, "aggregation": run_aggregation, "compression": run_compression}
+        "block": run_block, "collision": run_collision, "aggregation": run_aggregation, "compression": run_compression}
 
 LAB_PACE = {"ratchet": 10.0 / 3.0, "aggregation": 15.0, "compression": 15.0}
 """Simulated time per second of wall clock of the presets that run at "max" by default, as the
@@ -311,7 +320,7 @@ def test_each_step_takes_the_time_its_sheet_says(name):
             assert value == pytest.approx(ran, rel=0.15, abs=1.0), (step.title, step.time, ran)
 
 
-SPAN = re.compile(r"(\d+(?:\.\d+)?) (τ|T₀|load cycles?|loops?|cycles?)")
+SPAN = re.compile(r"(\d+(?:\.\d+)?) (τ|T₀|load cycles?|loops?|cycles?|collisions?)")
 """The simulated time a step's Time states first: in τ or T₀, or in the preset's clock units."""
 
 
@@ -624,6 +633,57 @@ def test_block_with_half_the_friction_matches_the_numbers_predicted_from_the_clo
     assert seen["friction_work"] / full["friction_work"] == pytest.approx(0.25, rel=0.01)
 
 
+# ------------------------------------------------------------------------------- the collision
+APPROACH_ENERGY = 0.5 * 0.5 * 2.0 ** 2
+"""½ m_eff v² of the collision preset: m_eff = 1/2, approach speed 2."""
+
+
+def collisions_at(seen: dict, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The collisions of damping ``zeta`` (rows: number, ζ, e_N, predicted) and their contacts' samples
+    (t, collision, δ, F_n, K_n δ)."""
+    rows = seen["collisions"][seen["collisions"][:, 1] == zeta]
+    path = seen["path"]
+    return rows, path[np.isin(path[:, 1], rows[:, 0])]
+
+
+def dashpot_work(path: np.ndarray) -> float:
+    """∮ F_n dδ over one collision's samples: the energy the dashpot took (trapezoids). The loop is
+    closed at δ = 0 at the first and last samples' forces: near the edges the dashpot's c·v is most
+    of the force and changes little between samples."""
+    overlap = np.concatenate([[0.0], path[:, 2], [0.0]])
+    force = np.concatenate([path[:1, 3], path[:, 3], path[-1:, 3]])
+    return float(np.trapezoid(force, overlap))
+
+
+@check("collision-elastic")
+def test_collision_without_damping_bounces_back_at_its_approach_speed_along_the_spring_line():
+    rows, path = collisions_at(run("collision").seen["collision-elastic"], 0.0)
+    assert len(rows) == 3
+    assert rows[:, 2] == pytest.approx(1.0, abs=1e-5)
+    assert path[:, 3] == pytest.approx(path[:, 4], rel=1e-9)  # the force is the spring's alone
+    assert path[:, 2].max() == pytest.approx(2.0 * math.sqrt(0.5 / 1e4), rel=2e-3)  # δ_max = v √(m_eff / K_n)
+
+
+@check("collision-restitution-predicted")
+def test_collision_restitution_at_zeta_one_half_is_the_formulas_to_the_fourth_decimal():
+    rows, path = collisions_at(run("collision").seen["collision-restitution-predicted"], 0.5)
+    predicted = math.exp(-math.pi * 0.5 / math.sqrt(0.75))
+    assert len(rows) == 3 and predicted == pytest.approx(0.163, abs=5e-4)
+    assert rows[:, 2] == pytest.approx(predicted, abs=5e-5) and rows[:, 3] == pytest.approx(predicted, rel=1e-12)
+    first = path[path[:, 1] == rows[0, 0]]
+    assert dashpot_work(first) == pytest.approx((1.0 - predicted ** 2) * APPROACH_ENERGY, rel=0.03)
+
+
+@check("collision-gilabert-damping")
+def test_collision_at_gilabert_damping_hardly_bounces_pulls_at_the_end_and_lasts_longer():
+    rows, path = collisions_at(run("collision").seen["collision-gilabert-damping"], 0.8)
+    assert len(rows) == 3 and rows[:, 2] == pytest.approx(0.0152, abs=1e-4)
+    first = path[path[:, 1] == rows[0, 0]]
+    assert first[-1, 3] < 0.0  # the dashpot pulls the parting disks
+    duration = first[-1, 0] - first[0, 0]
+    assert duration == pytest.approx(math.pi / (math.sqrt(1e4 / 0.5) * 0.6), abs=1.2e-3)  # 0.037
+
+
 # ------------------------------------------------------------------------------- aggregation
 def at(rows: np.ndarray, time: float) -> np.ndarray:
     """The sample nearest ``time``."""
@@ -757,7 +817,7 @@ def test_a_repeated_check_is_refused():
         parse_lesson(two, "ratchet", "x.md")
 
 
-@pytest.mark.parametrize("name", ["collision", "../teaching/ratchet", "ratchet.md", "", "Ratchet", None])
+@pytest.mark.parametrize("name", ["experiment", "../teaching/ratchet", "ratchet.md", "", "Ratchet", None])
 def test_a_preset_without_a_sheet_has_no_lesson(name):
     assert lesson(name) is None
 

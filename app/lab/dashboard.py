@@ -683,7 +683,9 @@ class Dashboard:
             parts.append(f"Δγ/cycle = {compact(fit.get('dgamma'))}")
         shown = {"phi": lambda v: f"Φ = {v:.3f}", "z": lambda v: f"z = {v:.2f}",
                  "sliding": lambda v: f"sliding: {v}", "loops": lambda v: f"loop {v}",
-                 "load": lambda v: f"load = {v:.2f} μF_n"}
+                 "load": lambda v: f"load = {v:.2f} μF_n", "collisions": lambda v: f"collisions: {v}",
+                 "restitution": lambda v: "" if v is None else f"e_N = {v:.4f} measured",
+                 "predicted": lambda v: f"{v:.4f} predicted"}
         parts += [shown[key](value) for key, value in readout.items() if key in shown]
         achieved = status.get("speed_achieved", 0.0)
         if state == "stepping":

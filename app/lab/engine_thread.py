@@ -54,7 +54,7 @@ LOG = logging.getLogger("granlab.lab")
 FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 CHUNK_SECONDS = 0.02
 SERIES_CAPACITY = {"contacts": 1_000_000, "time": 400_000, "block": 400_000, "springs": 400_000, "cycles": 100_000,
-                   "replay": 100_000}
+                   "replay": 100_000, "collision": 400_000}
 """Rows each series keeps (a tab that falls further behind gets the newest ones), and so a save
 holds: the watched paths of ratchet16 (320 samples of 6 contacts a cycle) for its last 520 cycles,
 so that a replay draws the cone plot at the frames of those (ratchet16 keeps the frames of 1350

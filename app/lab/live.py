@@ -38,6 +38,9 @@ def describe(status: dict, scene: dict) -> str:
         parts.append(f"{readout['z']:.2f} contacts per disk")
     if "sliding" in readout:
         parts.append(f"{readout['sliding']} contact{'s' if readout['sliding'] != 1 else ''} sliding")
+    if readout.get("restitution") is not None:
+        parts.append(f"{readout['collisions']} collisions, the last with restitution {readout['restitution']:.3f} "
+                     f"against {readout['predicted']:.3f} predicted")
     text = "; ".join(parts) + "."
     return f"{text} {scene_text(scene)}" if scene.get("disks") else text
 

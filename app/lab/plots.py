@@ -33,6 +33,8 @@ TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 LINE_ROLLOVER = 40000
 PATH_ROLLOVER = 12000
 """Rows a tab keeps of a time series, and segments of a path (a few load cycles of watched contacts)."""
+DOTS_ROLLOVER = 2000
+"""The restitution plot's last collisions: at "max" speed some 30 a second land on a few places."""
 PLOT_HEIGHT = 316
 """The least height of a plot: its drawing area is then at least 250 px under a one-line title,
 above its x axis (two plots fill the right of a 1366×768 screen; more scroll)."""
@@ -487,9 +489,74 @@ class ConePlot(LivePlot):
         self.cone.data = {"x": [top, -f0, top], "y": [mu * (top + f0), 0.0, -mu * (top + f0)]}
 
 
+class CollisionForcePlot(LivePlot):
+    """Gilabert Sec. II C: the normal force against the overlap along each collision, the spring's
+    line K_n δ beside it; each collision a loop of its own (no line joins one to the next), whose
+    area is the energy the dashpot took."""
+
+    reads = ("collision",)
+
+    def __init__(self, name="collision-force"):
+        fig = lab_figure(name, "Normal force against overlap, along each collision", "overlap δ (paper units)",
+                         "normal force F_n (paper units)")
+        super().__init__(name, fig)
+        self.lines = {}
+        for column, label, color, dash in (("force", "F_n: spring + dashpot", "#d55e00", "solid"),
+                                           ("spring", "K_n δ: the spring alone", "#0072b2", "dashed")):
+            source = ColumnDataSource({"x0": [], "y0": [], "x1": [], "y1": []}, name=f"{name}-{column}")
+            fig.segment("x0", "y0", "x1", "y1", source=source, color=color, line_width=2, line_dash=dash,
+                        legend_label=label)
+            self.lines[column] = (source, Segments())
+        self.sources = [source for source, _ in self.lines.values()]
+        legend_beside(fig)
+
+    def clear(self):
+        super().clear()
+        for _, segments in self.lines.values():
+            segments.reset()
+
+    def feed(self, series, columns, reset, status):
+        columns = _last(columns, PATH_ROLLOVER)
+        keys = np.asarray(columns.get("collision", []), dtype=int).reshape(-1, 1)
+        for column, (source, segments) in self.lines.items():
+            _stream(source, segments.add(keys, columns.get("overlap", []), columns.get(column, []), {}), reset,
+                    PATH_ROLLOVER)
+
+
+class RestitutionPlot(LivePlot):
+    """Gilabert Sec. II C: the restitution e_N of each collision against its damping ratio ζ (dots),
+    over the linear spring-dashpot's e_N = exp(−πζ / √(1 − ζ²)) (line): a dot off the line is a
+    collision the formula does not describe. The title gives the last collision's pair of numbers."""
+
+    reads = ("collisions",)
+
+    def __init__(self, name="restitution"):
+        fig = lab_figure(name, "Restitution e_N against the damping ratio ζ", "ζ (fraction of critical damping)",
+                         "e_N = parting speed / approach speed")
+        super().__init__(name, fig)
+        fig.x_range = Range1d(0, 1)
+        fig.y_range = Range1d(0, 1.05)
+        zeta = np.linspace(0.0, 0.995, 200)
+        fig.line(zeta, np.exp(-np.pi * zeta / np.sqrt(1.0 - zeta ** 2)), color="#0072b2", line_width=2,
+                 legend_label="exp(−πζ / √(1 − ζ²))")
+        self.points = ColumnDataSource({"zeta": [], "restitution": []}, name="restitution-points")
+        self.sources = [self.points]
+        fig.scatter("zeta", "restitution", source=self.points, size=9, color="#d55e00", marker="circle",
+                    legend_label="measured, one dot a collision")
+        legend_beside(fig)
+
+    def feed(self, series, columns, reset, status):
+        _stream(self.points, columns, reset, DOTS_ROLLOVER)
+        if len(columns.get("restitution", ())):
+            zeta, measured, predicted = columns["zeta"][-1], columns["restitution"][-1], columns["predicted"][-1]
+            self.figure.title.text = f"e_N = {measured:.4f} measured, {predicted:.4f} predicted (ζ = {zeta:.2f})"
+
+
 WAITS = {"strain-per-cycle": "its first point comes with the reference cycle, once the box is cycled",
          "q-gamma": "the load–strain loop starts with cycling",
-         "coulomb-cone": "its contacts are chosen, and watched, from the first load cycle"}
+         "coulomb-cone": "its contacts are chosen, and watched, from the first load cycle",
+         "restitution": "its first dot comes when the first collision is over",
+         "collision-force": "its loop is drawn while the disks touch"}
 """What an empty plot waits for, said above the key plots until it draws (a plot not named here: its first samples)."""
 
 
@@ -504,6 +571,10 @@ def make_plot(name: str, time_label: str, series: dict, reference_cycle: int = 0
         return ConePlot(name, "Watched contacts, Coulomb cone", "contacts", keyed=True)
     if name == "block-cone":
         return ConePlot(name, "The block's contact, Coulomb cone (Fig. 3)", "block", keyed=False)
+    if name == "restitution":
+        return RestitutionPlot()
+    if name == "collision-force":
+        return CollisionForcePlot()
     lines = LINES[name]
     plot = LinePlot(name, lines["title"], lines["series"], lines["lines"], lines.get("x", time_label), lines["y"],
                     series.get(lines["series"], lines.get("columns", ())), **lines.get("options", {}))

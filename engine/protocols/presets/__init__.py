@@ -28,11 +28,12 @@ from .aggregation import AggregationPreset
 from .base import Preset, View
 from .block import BlockPreset
 from .closed_path import ClosedPathPreset
+from .collision import CollisionPreset
 from .compression import CompressionPreset
 from .ratchet import EllipticPreset, Ratchet16Preset, RatchetPreset
 
 PRESETS = {cls.name: cls for cls in (RatchetPreset, Ratchet16Preset, EllipticPreset, ClosedPathPreset, BlockPreset,
-                                     AggregationPreset, CompressionPreset)}
+                                     CollisionPreset, AggregationPreset, CompressionPreset)}
 
 
 def preset_settings(name: str, **changes) -> LabSettings:
