@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from granlab.app.lab import plots
-from granlab.engine.protocols.presets.collision import restitution
+from granlab.engine.protocols.teaching import restitution
 
 
 def test_the_strain_plot_shows_its_legend_only_with_its_points():

@@ -24,6 +24,7 @@ from bokeh.plotting import figure
 
 from granlab.engine.observables import sliding
 from granlab.engine.params import TANGENTIAL
+from granlab.engine.protocols.teaching import restitution
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 from . import analysis
@@ -537,7 +538,7 @@ class RestitutionPlot(LivePlot):
         fig.x_range = Range1d(0, 1)
         fig.y_range = Range1d(0, 1.05)
         zeta = np.linspace(0.0, 0.995, 200)
-        fig.line(zeta, np.exp(-np.pi * zeta / np.sqrt(1.0 - zeta ** 2)), color="#0072b2", line_width=2,
+        fig.line(zeta, restitution(zeta), color="#0072b2", line_width=2,
                  legend_label="exp(−πζ / √(1 − ζ²))")
         self.points = ColumnDataSource({"zeta": [], "restitution": []}, name="restitution-points")
         self.sources = [self.points]

@@ -91,7 +91,7 @@ class Preferences(ReactiveHTML):
 """
     _scripts = {"render": "; ".join(_show(name) for name, _, _ in CHOICES) + SYSTEM_MOTION,
                 "show": "dialog.showModal()", "hide": "dialog.close()",
-                **{f"{name}_changed": _changed(name) for name, _, _ in CHOICES},
+                "projector_changed": _changed("projector"), "projector": _show("projector"),
                 "reduced_motion_changed": "data.motion_chosen = true; " + _changed("reduced_motion"),
-                "projector": _show("projector"), "reduced_motion": REDUCED_MOTION,
-                "single_keys": _show("single_keys")}
+                "reduced_motion": REDUCED_MOTION,
+                "single_keys_changed": _changed("single_keys"), "single_keys": _show("single_keys")}

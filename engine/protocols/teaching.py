@@ -42,6 +42,17 @@ def _pair_law(model: str, zeta: float, mu: float, stiffness: float, tangential_d
 
 
 # ---------------------------------------------------------------------------------------------- collision
+def restitution(zeta):
+    """The linear spring-dashpot's normal restitution, ``exp(-pi zeta / sqrt(1 - zeta²))`` (Gilabert
+    Eq. 6), of a damping ratio or an array of them."""
+    return np.exp(-np.pi * zeta / np.sqrt(1.0 - np.square(zeta)))
+
+
+def contact_duration(zeta: float, stiffness: float, reduced_mass: float) -> float:
+    """How long the overlap lasts: half a period of the damped oscillator, ``pi / (w0 sqrt(1 - zeta²))``."""
+    return math.pi / (math.sqrt(stiffness / reduced_mass) * math.sqrt(1.0 - zeta * zeta))
+
+
 @dataclass(frozen=True)
 class CollisionResult(_Result):
     restitution: float
@@ -69,10 +80,7 @@ def collision(model: str = "cundall-strack", zeta: float = 0.3, mu: float = 0.5,
     positive("radius", radius)
     positive("mass", mass)
     positive("speed", speed)
-    m_eff = 0.5 * mass
-    omega0 = math.sqrt(stiffness / m_eff)
-    damped = omega0 * math.sqrt(1.0 - zeta * zeta)
-    duration_predicted = math.pi / damped
+    duration_predicted = contact_duration(zeta, stiffness, 0.5 * mass)
     if dt is None:
         dt = duration_predicted / steps_per_collision
     gap = 0.05 * radius
@@ -94,7 +102,7 @@ def collision(model: str = "cundall-strack", zeta: float = 0.3, mu: float = 0.5,
     relative = sim.particles.velocity[1, 0] - sim.particles.velocity[0, 0]
     return CollisionResult(
         restitution=float(relative / approach),
-        restitution_predicted=math.exp(-math.pi * zeta / math.sqrt(1.0 - zeta * zeta)),
+        restitution_predicted=float(restitution(zeta)),
         contact_duration=touching * sim.dt, contact_duration_predicted=duration_predicted,
         steps_in_contact=touching, dt=sim.dt, zeta=zeta, model=model)
 

@@ -9,17 +9,8 @@ import numpy as np
 from ...params import ContactLaw, Integration
 from ...simulation import Simulation
 from ...state import ParticleState
+from ..teaching import contact_duration, restitution
 from .base import Preset
-
-
-def restitution(zeta: float) -> float:
-    """The linear spring-dashpot's normal restitution, ``exp(-pi zeta / sqrt(1 - zeta²))``."""
-    return math.exp(-math.pi * zeta / math.sqrt(1.0 - zeta * zeta))
-
-
-def contact_duration(zeta: float, stiffness: float, reduced_mass: float) -> float:
-    """How long the overlap lasts: half a period of the damped oscillator, ``pi / (w0 sqrt(1 - zeta²))``."""
-    return math.pi / (math.sqrt(stiffness / reduced_mass) * math.sqrt(1.0 - zeta * zeta))
 
 
 class CollisionPreset(Preset):
@@ -48,7 +39,7 @@ class CollisionPreset(Preset):
     """About 45 samples along a contact (0.022 to 0.03 long, ζ = 0 to 0.7: an eighth of the period or less)."""
     radius, mass, stiffness, speed, gap = 0.5, 1.0, 1.0e4, 1.0, 0.05
     steps_per_contact = 200
-    """Time steps along a contact of ζ = 0: e_N measured within 0.2 % of the formula up to ζ = 0.95."""
+    """Time steps along a contact of ζ = 0: e_N measured within 5×10⁻⁵ of the formula at ζ = 0, 0.3, 0.5 and 0.8."""
 
     def _build(self) -> None:
         s = self.settings
@@ -99,7 +90,7 @@ class CollisionPreset(Preset):
         velocity = self._sim.particles.velocity
         self._collisions += 1
         self._measured = float(velocity[1, 0] - velocity[0, 0]) / (2 * self.speed)
-        self._emit("collisions", (self._collisions, self._zeta, self._measured, restitution(self._zeta)))
+        self._emit("collisions", (self._collisions, self._zeta, self._measured, float(restitution(self._zeta))))
         self.stage = "parted"
 
     def _overlap(self) -> float:
@@ -128,7 +119,7 @@ class CollisionPreset(Preset):
     def readout(self) -> dict:
         """The collisions so far, the last one's e_N (None before the first) and the formula's for ζ in effect."""
         return {"collisions": self._collisions, "restitution": self._measured,
-                "predicted": restitution(self.settings.damping_ratio)}
+                "predicted": float(restitution(self.settings.damping_ratio))}
 
     def phase(self) -> str:
         """``collision 4 · in contact``."""
