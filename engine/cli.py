@@ -24,13 +24,15 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from importlib.metadata import version
 from pathlib import Path
 
 from .analysis import ANALYSES, LOADS
-from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed
+from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed, one_line
 from .params import CELL_MASS_READINGS, GILABERT_DT_SAFETY, TANGENTIAL, TANGENTIAL_MODELS
 from .reproduce import REPRODUCTIONS, ROLLING_CASES
 
@@ -1002,28 +1004,58 @@ def main(argv: list[str] | None = None) -> int:
     return run_args(build_parser().parse_args(argv))
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised as Ctrl-C's KeyboardInterrupt is, so that a command stopped either way
+    unwinds: its hidden part files are removed and its run file closed whole."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def run_args(args) -> int:
-    """Run a parsed command: print its result (or one JSON object); errors exit with status 2."""
+    """Run a parsed command: print its result (or one JSON object); errors exit with status 2,
+    Ctrl-C with 130 and SIGTERM with 143, each after one line on standard error."""
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    try:
+        result = _handle(args)
+    except KeyboardInterrupt as stop:
+        terminated = isinstance(stop, Terminated)
+        print(f"granlab {args.command}: stopped by {'SIGTERM' if terminated else 'Ctrl-C'}", file=sys.stderr)
+        return 143 if terminated else 130
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+    if isinstance(result, GranLabError):
+        print(f"granlab {args.command}: error: {one_line(str(result))}", file=sys.stderr)
+        return 2
+    return _print_result(args, result)
+
+
+def _handle(args):
+    """The command's result, or the GranLabError that tells why there is none."""
     from .compilation import announced
 
     try:
         with announced():
-            result = args.handler(args)
+            return args.handler(args)
     except WriteFailed as error:
-        print(f"granlab {args.command}: error: {error}", file=sys.stderr, flush=True)
+        print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr, flush=True)
         sys.stdout.flush()
         os._exit(2)  # see WriteFailed: an exit that closes the file would crash the process
     except GranLabError as error:
-        print(f"granlab {args.command}: error: {error}", file=sys.stderr)
-        return 2
+        return error
     except Exception as error:
         from .io import h5md
 
         source = next((getattr(args, name) for name in ("runfile", "resume") if getattr(args, name, None)), None)
         if source is None or not h5md.raised_by_damage(error):
             raise
-        print(f"granlab {args.command}: error: {h5md.damaged(source, error)}", file=sys.stderr)
-        return 2
+        return h5md.damaged(source, error)
+
+
+def _print_result(args, result) -> int:
     from .io.jsonsafe import jsonable
 
     try:

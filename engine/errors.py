@@ -5,6 +5,11 @@ value into the lab or a scene file knows how to fix it.
 """
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: what another library says (HDF5's errors run to several) joined by spaces."""
+    return " ".join(text.split())
+
+
 class GranLabError(Exception):
     """Base class of all GranLab errors."""
 
@@ -52,3 +57,8 @@ class WriteFailed(OutputError):
     HDF5 handle is left as it is: closing it would write again, and h5py then crashes the process
     as it exits; a command ends the process at once after saying so (``os._exit``). The file reads
     up to what was written, as a killed writer's does."""
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = reason
+

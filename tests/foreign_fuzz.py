@@ -167,11 +167,20 @@ def _h5md_base(path: Path) -> None:
         group.create_dataset("radius", data=state.radii)
 
 
+def _retype(position: h5py.Group, rng: np.random.Generator) -> None:
+    """One of the position element's datasets replaced by one of another type or rank."""
+    name, data = [("value", 3.0), ("value", np.zeros(5)), ("step", np.array([(1, 2.0), (2, 3.0)], dtype="i4,f8")),
+                  ("step", np.array([b"a", b"b"])), ("step", np.arange(7)), ("time", np.array([np.nan, 1.0])),
+                  ("time", "now")][int(rng.integers(7))]
+    del position[name]
+    position.create_dataset(name, data=data)
+
+
 def h5md_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]:
     base = folder / "base.h5md"
     _h5md_base(base)
     raw = base.read_bytes()
-    kinds = ("truncate", "flip", "page", "shape", "nan", "drop", "radius", "edges")
+    kinds = ("truncate", "flip", "page", "shape", "nan", "drop", "radius", "edges", "retype")
     cases = []
     for k in range(count):
         kind = kinds[k % len(kinds)]
@@ -198,6 +207,8 @@ def h5md_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]
                     value = group["position/value"]
                     value[int(rng.integers(2)), int(rng.integers(200)), int(rng.integers(2))] = \
                         rng.choice([np.nan, np.inf, 1e308])
+                elif kind == "retype":
+                    _retype(group["position"], rng)
                 elif kind == "drop":
                     del group[str(rng.choice(["radius", "box/edges", "position/value", "position"]))]
                 elif kind == "radius":

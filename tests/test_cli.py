@@ -225,7 +225,7 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
             assert process.returncode == 2 and process.stderr.count("\n") == 1, (args, process.stderr)
             assert process.stderr.startswith(f"granlab serve: error: {message}"), (args, process.stderr)
     folder = granlab("run", str(tmp_path), check=False)
-    assert folder.returncode == 2 and f"{str(tmp_path)!r} is a folder: give a scene file" in folder.stderr
+    assert folder.returncode == 2 and f"{str(tmp_path)!r} is a folder, not a file: give a scene file" in folder.stderr
     assert granlab("--version").stdout.startswith("granlab ")
 
 
@@ -288,3 +288,23 @@ def test_help_is_read_without_the_engine_numba_or_numpy(command):
     result = json.loads(process.stdout)
     assert "usage: granlab" in result["shown"]
     assert not {"numpy", "numba", "scipy", "h5py", "panel", "bokeh"} & set(result["modules"])
+
+
+def test_a_special_file_given_as_input_is_named_as_what_it_is(tmp_path, capsys):
+    """Before: a FIFO and a link to /dev/zero were "does not exist"; a folder too, for a run file."""
+    import os
+
+    from granlab.app.cli import main
+
+    os.mkfifo(tmp_path / "pipe")
+    (tmp_path / "zero").symlink_to("/dev/zero")
+    (tmp_path / "nowhere").symlink_to(tmp_path / "gone")
+    what = {"pipe": "is a named pipe (FIFO), not a file", "zero": "is a device (/dev/zero), not a file",
+            "nowhere": "is a link to nowhere", ".": "is a folder, not a file"}
+    for name, reason in what.items():
+        path = str(tmp_path / name)
+        for command in (["run", path], ["info", path], ["analyze", path, "packing"], ["render", path, "--out",
+                                                                                     str(tmp_path / "a.png")]):
+            assert main(command) == 2
+            err = capsys.readouterr().err
+            assert err.count("\n") == 1 and f"{path!r} {reason}" in err, (command, err)

@@ -5,6 +5,7 @@ H5MD reader) and by GranLab's, and compared with the run file."""
 import functools
 import json
 import pkgutil
+import signal
 import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
@@ -273,10 +274,33 @@ def test_a_killed_export_or_render_leaves_nothing_under_its_names_and_its_rerun_
     finally:
         process.kill()
     assert not any((tmp_path / name).exists() for name in written)
+    assert len(list(tmp_path.glob(".*.part"))) <= 1  # what the killed command was writing, if it had begun
     granlab(*args)
     assert all((tmp_path / name).exists() for name in written)
+    assert not list(tmp_path.glob(".*.part"))  # its writer dead, the rerun removed it
     if command[0] == "export" and command[-1] == "vtk":
         assert len(list((tmp_path / "paraview").iterdir())) == 1 + 3 * FRAMES
+
+
+@pytest.mark.parametrize("stop, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+@pytest.mark.parametrize("command, out", [(("export", "--format", "vtk"), "paraview"), (("export", "--format", "xyz"),
+                                                                                       "frames.xyz")])
+def test_a_command_stopped_by_sigterm_or_ctrl_c_removes_its_part_files_at_once_and_says_so(
+        run_file, tmp_path, command, out, stop, code):
+    """Before: SIGTERM left the hidden ``.NAME.*.part`` folder, which later exports never removed."""
+    args = [command[0], str(run_file), *command[1:], "--out", str(tmp_path / out), "--frames", ":"]
+    process = subprocess.Popen([sys.executable, "-c", STALLED, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    try:
+        assert process.stdout.readline() == "stalled\n"
+        process.send_signal(stop)
+        _, stderr = process.communicate(timeout=30)
+    finally:
+        process.kill()
+    assert process.returncode == code
+    assert stderr.splitlines()[-1] == f"granlab {command[0]}: stopped by {'SIGTERM' if code == 143 else 'Ctrl-C'}"
+    assert "Traceback" not in stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
 def _small_file_limit():

@@ -1,6 +1,6 @@
 """420 seeded mutations of valid foreign files (LAMMPS dump, its dump local, extended XYZ, H5MD:
 truncations, flipped bytes, zeroed pages, deleted or repeated lines, swapped or renamed columns,
-huge counts and shapes, NaN, inf and huge values, negative radii, duplicate ids, junk) read by
+huge counts and shapes, datasets of another type or rank (a scalar position, a compound step), NaN, inf and huge values, negative radii, duplicate ids, junk) read by
 ``granlab analyze`` (:mod:`tests.foreign_fuzz`): each ends within its deadline in a one-line error
 (exit 2) or a result, never in a traceback, a hang or a memory limit, and a result that is not a
 packing is said not to be one (:mod:`granlab.engine.analysis.plausibility`). Before this check 31 of the

@@ -3,9 +3,11 @@ never held by it — a child that hangs is given up after its time limit or kill
 that crashes says how it ended."""
 
 import os
+import resource
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from granlab.app.lab.jobs import Jobs
@@ -95,3 +97,25 @@ def test_a_crashing_child_says_how_it_ended(jobs):
     runner.start("save", "saving run1.h5", crashing, ())
     assert outcomes.wait().error == ("saving run1.h5 failed: its process ended without an answer (killed by "
                                      "signal 6)")
+
+
+def saving_onto_a_full_disk(report, path):
+    """The lab's "Save run" of a 400-disk packing where only 20 kB more fit (a file size limit, as a full disk)."""
+    from granlab.app.lab.replay import write_run
+    from granlab.engine import ContactLaw, Integration, ParticleState, Simulation
+    from granlab.engine.generate import square_lattice
+
+    resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+    sim = Simulation(ParticleState(square_lattice(20, 20, 1.0), np.full(400, 0.5)), ContactLaw(), Integration())
+    frames = [(sim.snapshot(), "{}", "still")] * 3
+    return write_run(report, path, sim, True, frames, {}, {}, {}, [])
+
+
+def test_a_save_onto_a_full_disk_says_in_one_line_that_nothing_was_written(jobs, tmp_path):
+    """Before: "... What was written before stays readable; ...; nothing was written under its name" (both)."""
+    runner, outcomes = jobs
+    runner.start("save", "saving run1.h5", saving_onto_a_full_disk, (tmp_path / "run1.h5",))
+    error = outcomes.wait().error
+    assert error.startswith(f"writing {str(tmp_path / 'run1.h5')!r} failed: File too large; nothing was written"), error
+    assert "stays readable" not in error and "\n" not in error
+    assert list(tmp_path.iterdir()) == []

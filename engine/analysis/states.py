@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,7 @@ from ..errors import GranLabError
 from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, XYZFrame, read_xyz_frames
 from ..io.h5md import (RunFileError, cell_control_of, frame_count, open_run, parameters, read_frame,
                        walls_from_json)
+from ..io.inputs import require_file
 from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
 from ..simulation import ContactSnapshot, Snapshot
@@ -104,8 +106,7 @@ def detect_format(path: str | Path) -> str:
     """The format of ``path`` among :data:`FORMATS`, from its first bytes (a file named ``.h5``,
     ``.hdf5`` or ``.h5md`` is H5MD, so that a broken one is named as a broken HDF5 file)."""
     path = Path(path)
-    if not path.is_file():
-        raise RunFileError(f"{str(path)!r} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
+    require_file(path, "file", RunFileError)
     if path.suffix.lower() in (".h5", ".hdf5", ".h5md") or h5py.is_hdf5(path):
         return "h5md"
     with open(path, "rb") as f:
@@ -189,8 +190,7 @@ def _h5md_frames(path: str | Path) -> int:
         group = _particle_group(f, str(path))
         if "position" not in group:
             raise RunFileError(f"{str(path)!r} has no position element in {group.name}: not an H5MD particle file")
-        position = group["position"]
-        return position["value"].shape[0] if isinstance(position, h5py.Group) else 1
+        return _frames_of(group["position"], str(path))
 
 
 def _h5md_state(path: str | Path, frame: int, gap: float) -> PackingState:
@@ -284,6 +284,37 @@ def _element(group: h5py.Group, name: str, index: int, frames: int):
     return element[()]
 
 
+def _frames_of(position, path: str) -> int:
+    """Frames of an H5MD position element: a group whose ``value`` is a (frames, N, dimension)
+    dataset, or a fixed (N, dimension) dataset (one frame)."""
+    values = position.get("value") if isinstance(position, h5py.Group) else position
+    if not isinstance(values, h5py.Dataset) or values.ndim != (3 if isinstance(position, h5py.Group) else 2):
+        found = "missing" if values is None else "a group" if isinstance(values, h5py.Group) else \
+            f"of shape {values.shape}"
+        raise RunFileError(f"{path!r}: {position.name}{'/value' if isinstance(position, h5py.Group) else ''} is "
+                           f"{found}; a dataset of shape (frames, N, dimension) is needed (H5MD's time-dependent "
+                           f"position)")
+    return values.shape[0] if isinstance(position, h5py.Group) else 1
+
+
+def _sampled(position: h5py.Group, name: str, index: int, frames: int, path: str) -> float:
+    """Frame ``index``'s ``step`` or ``time`` of an H5MD element: one number per frame, or H5MD's
+    fixed interval (a scalar, from its ``offset``)."""
+    data = position.get(name)
+    if not isinstance(data, h5py.Dataset) or data.dtype.kind not in "iuf" or data.shape not in ((), (frames,)):
+        shape = "missing" if data is None else "a group" if isinstance(data, h5py.Group) else \
+            f"{data.dtype} of shape {data.shape}"
+        raise RunFileError(f"{path!r}: {position.name}/{name} is {shape}; numbers, one per frame ({frames}) or one "
+                           f"fixed interval, are needed")
+    offset = data.attrs.get("offset", 0)
+    if not isinstance(offset, (int, float, np.integer, np.floating)):
+        raise RunFileError(f"{path!r}: {position.name}/{name}'s offset is {offset!r}; a number is needed")
+    value = float(data[()] * index + offset) if data.shape == () else float(data[index])
+    if not math.isfinite(value):
+        raise RunFileError(f"{path!r}: {position.name}/{name} of frame {index} is {value}; a finite number is needed")
+    return value
+
+
 def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingState:
     group = _particle_group(f, path)
     if "position" not in group:
@@ -296,7 +327,7 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
         raise RunFileError(f"{path!r}: the box has dimension {box.attrs.get('dimension')}; 2D boxes (or 3D ones whose "
                            f"disks lie in one plane) can be analysed")
     position = group["position"]
-    frames = position["value"].shape[0] if isinstance(position, h5py.Group) else 1
+    frames = _frames_of(position, path)
     if frames == 0:
         raise RunFileError(f"{path!r} holds no frame")
     if not -frames <= index < frames:
@@ -332,8 +363,9 @@ def _generic_state(f: h5py.File, index: int, path: str, gap: float) -> PackingSt
     periodic = tuple(b == "periodic" for b in boundary[:2])
     positions = _planar(positions, radii, source)
     contacts = geometric_contacts(positions, radii, edges[:2], periodic, gap)
-    step = int(group["position/step"][index]) if isinstance(position, h5py.Group) else 0
-    time = float(group["position/time"][index]) if isinstance(position, h5py.Group) and "time" in position else 0.0
+    step = int(_sampled(position, "step", index, frames, path)) if isinstance(position, h5py.Group) else 0
+    time = _sampled(position, "time", index, frames, path) if isinstance(position, h5py.Group) and "time" in position \
+        else 0.0
     return _without_walls(positions, radii, contacts, ContactLaw(), edges[:2], periodic, time, step, False, source)
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .h5md import RunFileError
+from .inputs import require_file
 
 RADIUS_NAMES = ("radius", "radii")
 DIAMETER_NAMES = ("diameter", "diameters")
@@ -46,8 +47,7 @@ def read_xyz_frames(path: str | Path) -> list[XYZFrame]:
     import ase.io
 
     path = Path(path)
-    if not path.is_file():
-        raise RunFileError(f"extended XYZ file {str(path)!r} does not exist")
+    require_file(path, "extended XYZ file", RunFileError)
     check_counts(path)
     try:
         frames = ase.io.read(path, index=":", format="extxyz")

@@ -43,6 +43,7 @@ from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, P
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
 from . import superblock
+from .inputs import require_file
 from .outputs import failed_write_reason, free_bytes, occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
@@ -177,7 +178,7 @@ def _write(method):
             step = getattr(args[0], "step", None) if args else None
             at = f" at step {step}" if step is not None else ""
             self.failed = WriteFailed(f"writing {str(self.path)!r} failed{at}: {reason}. What was written before "
-                                      f"stays readable; {kept}")
+                                      f"stays readable; {kept}", reason)
             raise self.failed from error
     return write
 
@@ -477,8 +478,7 @@ def open_run(path: str | Path) -> h5py.File:
     the end of what it wrote.
     """
     path = Path(path)
-    if not path.is_file():
-        raise RunFileError(f"run file {str(path)!r} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
+    require_file(path, "run file", RunFileError)
     try:
         return h5py.File(path, "r")
     except OSError as error:

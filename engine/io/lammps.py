@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .h5md import RunFileError
+from .inputs import require_file
 
 ATOM_ITEM = "ATOMS"
 LOCAL_ITEM = "ENTRIES"
@@ -78,8 +79,7 @@ class Dump:
         self.path = Path(path)
         self.item = item
         self.what = "atom" if item == ATOM_ITEM else "entry"
-        if not self.path.is_file():
-            raise DumpError(f"dump {str(self.path)!r} does not exist" + (" (it is a folder)" if self.path.is_dir() else ""))
+        require_file(self.path, "dump", DumpError)
         self._headers = self._index()
 
     @property

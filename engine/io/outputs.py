@@ -13,7 +13,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import OutputError
+from ..errors import OutputError, WriteFailed
 
 
 def occupied(path: Path) -> bool:
@@ -92,22 +92,49 @@ def room_for_one_file(folder: Path) -> int:
     return min(free_bytes(folder), limit) if limit != resource.RLIM_INFINITY else free_bytes(folder)
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive
+        pass
+    return True
+
+
+def remove_orphans(home: Path, name: str) -> list[Path]:
+    """Remove the hidden ``.NAME.PID-*.part`` folders in ``home`` whose writer (PID) has ended:
+    what a command killed outright while writing NAME left. Returns those removed."""
+    pattern = re.compile(rf"\.{re.escape(name)}\.(\d+)-[0-9a-f]{{8}}\.part")
+    removed = []
+    for entry in home.iterdir():
+        found = pattern.fullmatch(entry.name)
+        if found and not _alive(int(found.group(1))):
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
+
+
 @contextmanager
 def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
     """A new hidden folder to write a command's files into, moved into ``folder`` (made if
     missing) once the block ends without error: the hidden folder renamed to ``folder`` if that
     did not exist, else file by file, those named in ``last`` last (the file that lists the
-    others, the one a reader opens first). On an error the files are removed; a killed command
-    leaves a hidden ``.NAME.*.part`` folder (NAME the first of ``last``, else ``folder``'s) and
-    nothing under the names it was writing."""
+    others, the one a reader opens first). On an error, Ctrl-C or SIGTERM (see
+    :func:`granlab.engine.cli.run_args`) the files are removed; a command killed outright leaves a
+    hidden ``.NAME.PID-*.part`` folder (NAME the first of ``last``, else ``folder``'s; PID its
+    writer's), removed by the next command that writes NAME there, and nothing under the names it
+    was writing."""
     folder = Path(folder).absolute()
     new = not occupied(folder)
     home = folder.parent if new else folder
     home.mkdir(parents=True, exist_ok=True)
+    name = last[0] if last else folder.name
+    remove_orphans(home, name)
     while True:
         # made here, not by mkdtemp, so that the folder renamed into place has the user's
         # usual permissions (mkdtemp's are 0700)
-        stage = home / f".{last[0] if last else folder.name}.{secrets.token_hex(4)}.part"
+        stage = home / f".{name}.{os.getpid()}-{secrets.token_hex(4)}.part"
         try:
             stage.mkdir()
             break
@@ -117,7 +144,8 @@ def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
         try:
             yield stage
         except (OSError, RuntimeError) as error:
-            reason = failed_write_reason(error)
+            # a run file's writer says what stays readable of its file: here nothing of it stays
+            reason = error.reason if isinstance(error, WriteFailed) else failed_write_reason(error)
             if reason is None:
                 raise
             raise OutputError(f"writing {str(folder / last[0]) if last else str(folder)!r} failed: {reason}; nothing "

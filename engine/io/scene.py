@@ -23,6 +23,7 @@ from ..errors import ParameterError, SceneError
 from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls
 from ..simulation import Simulation
 from ..state import ParticleState
+from .inputs import require_file
 
 SIMULATION_KEYS = {"duration", "steps", "dt", "dt_safety", "skin", "max_overlap", "initial_overlap", "gravity",
                    "record_every", "threads"}
@@ -84,11 +85,8 @@ def load_scene(path_or_name: str | Path) -> Scene:
     if not path.suffix and str(path_or_name) in builtin_scenes():
         text = (resources.files(__package__) / "scenes" / f"{path_or_name}.toml").read_text()
         return parse_scene(text, origin=f"built-in scene {path_or_name!r}")
-    if path.is_dir():
-        raise SceneError(f"{str(path)!r} is a folder: give a scene file (.toml) or a built-in scene "
-                         f"({', '.join(builtin_scenes())})")
-    if not path.is_file():
-        raise SceneError(f"scene file {str(path)!r} does not exist (built-in scenes: {', '.join(builtin_scenes())})")
+    require_file(path, "scene file", SceneError, hint=f": give a scene file (.toml) or a built-in scene "
+                                                       f"({', '.join(builtin_scenes())})")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
