@@ -9,7 +9,7 @@ import sys
 import time
 
 from granlab.engine import cli as engine_cli
-from granlab.engine.errors import GranLabError
+from granlab.engine.errors import GranLabError, one_line
 from granlab.engine.io.export import EXPORT_FORMATS, print_summary as print_export_summary
 
 
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
 
             args.handler, args.printer = bench.handler, bench.print_result
     except GranLabError as error:
-        print(f"granlab {args.command}: error: {error}", file=sys.stderr)
+        print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr)
         return 2
     return engine_cli.run_args(args)
 
