@@ -31,6 +31,7 @@ import time
 from importlib.metadata import version
 from pathlib import Path
 
+from . import costs
 from .analysis import ANALYSES, LOADS
 from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed, one_line
 from .params import CELL_MASS_READINGS, GILABERT_DT_SAFETY, TANGENTIAL, TANGENTIAL_MODELS
@@ -80,6 +81,10 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         frame_every = frame_every or record.get("frame_every")
     else:
         scene = load_scene(name)
+        memory = costs.check_memory(scene.particles.count, "the scene")
+        if memory >= costs.ANNOUNCE_BYTES:
+            print(f"building {scene.particles.count} disks (up to {costs.size(memory)} of memory)", file=sys.stderr,
+                  flush=True)
         if scene.threads:
             numba.set_num_threads(scene.threads)
         threaded = numba.get_num_threads() > 1 and scene.particles.count >= PARALLEL_MIN_DISKS
@@ -88,6 +93,8 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         total = scene.step_count(sim.dt)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
     every = frame_every or scene.record_every or total or 1
+    if out is not None:
+        _check_run_file_room(sim, out, 1 + -(-total // every))
     writer = h5md.RunWriter(out, sim, scene=scene.source, overwrite=force,
                             protocol={"command": "run", "scene": scene.title, "frame_every": every}) if out else None
     last_checkpoint = {"frames": 0, "time": time.perf_counter()}
@@ -145,10 +152,24 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     }
 
 
+def _check_run_file_room(sim, out: str, frames: int) -> None:
+    """Refuse a run file the disk cannot hold; say what a large one will take before it is begun."""
+    from .io import h5md
+    from .io.outputs import room_for_one_file
+
+    need, room = h5md.run_file_bytes(sim, frames), room_for_one_file(Path(out).absolute().parent)
+    if need > room:
+        raise costs.CostError(f"--out {out!r}: {frames} frames of {sim.particles.count} disks need up to "
+                              f"{costs.size(need)}; {costs.size(room)} free there: fewer frames (--frame-every, "
+                              f"simulation.record_every), or another disk")
+    if need >= costs.ANNOUNCE_BYTES:
+        print(f"writing {frames} frames to {out} (up to {costs.size(need)})", file=sys.stderr, flush=True)
+
+
 def _run_progress():
     """A line on standard error once a second of stepping, from the first second on (a short run
     prints none; the clock starts with the first steps, after the imports and the kernels' loading):
-    ``running: step 12000 of 80000 (15 %), t = 3.2, 4 s``."""
+    ``running: step 12000 of 80000 (15 %), t = 3.2, 4 s, about 23 s left``."""
     clock = {}
 
     def report(done: int, total: int, sim) -> None:
@@ -156,8 +177,9 @@ def _run_progress():
         start = clock.setdefault("start", now)
         if now - clock.setdefault("shown", now) >= 1.0:
             clock["shown"] = now
+            left = (total - done) * (now - start) / done
             print(f"running: step {done} of {total} ({100 * done / total:.0f} %), t = {sim.time:.4g}, "
-                  f"{now - start:.0f} s", file=sys.stderr, flush=True)
+                  f"{now - start:.0f} s, about {costs.duration(left)} left", file=sys.stderr, flush=True)
     return report
 
 
@@ -315,6 +337,7 @@ def _prepare(args) -> dict:
 
     if args.out:
         check_output(args.out, force=args.force)
+    costs.check_memory(args.particles, "--particles")
     if args.method == "compress" and args.dt_safety is not None:
         raise ParameterError("--dt-safety", args.dt_safety, "an option of --method 1 and 2 only")
     threaded = numba.get_num_threads() > 1 and args.particles >= PARALLEL_MIN_DISKS
@@ -367,6 +390,7 @@ def _study(args) -> dict:
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
     sweep = len(args.amplitude) > 1
     results = []
+    costs.check_memory(args.particles * min(args.samples, os.cpu_count() or 1), "--particles on every core")
     for amplitude in args.amplitude:
         study = RatchetStudy(particles=args.particles, samples=args.samples, cycles=args.cycles, models=models,
                              amplitude=amplitude, period=args.period,
@@ -479,6 +503,7 @@ def _reproduce(args) -> dict:
             particles, samples = PAPER_SIZE[args.table]
             given = {"particles": particles, "samples": samples, **given}
         reproduction = Reproduction(args.table, **given)
+        costs.check_memory(reproduction.particles * (args.workers or os.cpu_count() or 1), "--particles on every worker")
         folder = None if args.out is None else start_folder(args.out, reproduction)
     try:
         result = run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
@@ -547,7 +572,7 @@ def _info(args) -> dict:
 
 
 def _print_info(result: dict) -> None:
-    print(f"{result['run_file']}: H5MD {'.'.join(map(str, result.get('h5md_version', [])))} "
+    print(f"{result['run_file']}: H5MD {'.'.join(map(str, result.get('h5md_version') or ['?']))} "
           f"by {result.get('creator', '?')}")
     print(f"  {result.get('particles', '?')} disks, {result['frames']} complete frames"
           + (f", t = {result['first_time']:.6g} .. {result['last_time']:.6g} (step {result['last_step']})"
@@ -1044,12 +1069,12 @@ def _handle(args):
         print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr, flush=True)
         sys.stdout.flush()
         os._exit(2)  # see WriteFailed: an exit that closes the file would crash the process
-    except GranLabError as error:
-        return error
     except Exception as error:
         from .io import h5md
 
         source = next((getattr(args, name) for name in ("runfile", "resume") if getattr(args, name, None)), None)
+        if isinstance(error, GranLabError) and not (source and isinstance(error, h5md.DamagedRunFile)):
+            return error
         if source is None or not h5md.raised_by_damage(error):
             raise
         return h5md.damaged(source, error)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from .checkpoint import check_state
 from .errors import DivergenceError, ParameterError
 from .kernels import gathered as k_gathered, integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
@@ -661,17 +662,15 @@ class Simulation:
         return state
 
     def restore_state(self, state: dict) -> None:
-        """Overwrite this simulation's state with one from :meth:`export_state` (same disks and walls)."""
-        n = self.particles.count
-        if state["particles/position"].shape != (n, 2) or state["walls/offset"].shape != (self.walls.count,):
-            raise ParameterError("checkpoint", f"{state['particles/position'].shape[0]} disks",
-                                 f"{n} disks and {self.walls.count} walls, as this simulation")
+        """Overwrite this simulation's state with one from :meth:`export_state` (same disks and
+        walls), checked first (:func:`granlab.engine.checkpoint.check_state`): a state refused
+        leaves this simulation as it was."""
+        rows = check_state(state, self.export_state(), self.particles.count, self.walls.count)
         sources = {"particles": self.particles, "walls": self.walls, "cell": self.cell}
         for group, names in self.STATE_ARRAYS.items():
             for name in names:
                 target = getattr(self.workspace, name) if group == "workspace" else getattr(sources[group], name)
                 target[...] = state[f"{group}/{name}"]
-        rows = int(state["contacts/particle_i"].shape[0])
         if rows > self.contacts.capacity:
             self.contacts.grow(rows + rows // 4)
             self._spare.grow(rows + rows // 4)

@@ -74,8 +74,7 @@ class Replay:
             self.count = h5md.frame_count(f)
             if self.count == 0:
                 raise h5md.RunFileError(f"{path.name} holds no complete frame to replay")
-            params = h5md.parameters(f)
-            walls = h5md.walls_from_json(params["walls_json"])
+            params, walls = h5md.parameters(f), h5md.run_walls(f)
             self.normals = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
             self.frames = []
             for k in range(self.count):

@@ -616,7 +616,7 @@ def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
     """(SceneFrame, caption) of each frame ``indices`` of an open GranLab run file ``f``, with
     the contacts the lab watched (a lab run's), its views named (the closed path's pairs) and the
     phase of its protocol in the caption."""
-    walls = h5md.walls_from_json(h5md.parameters(f)["walls_json"])
+    walls = h5md.run_walls(f)
     normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
     protocol = _protocol(f)
     watched = [tuple(pair) for pair in protocol.get("watched", [])]

@@ -21,7 +21,6 @@ Other codes' files carry no contact law: it is :class:`ContactLaw`'s default, or
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -33,8 +32,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import GranLabError
 from ..io.extxyz import DIAMETER_NAMES, RADIUS_NAMES, XYZFrame, read_xyz_frames
-from ..io.h5md import (RunFileError, cell_control_of, frame_count, open_run, parameters, read_frame,
-                       walls_from_json)
+from ..io.h5md import RunFileError, cell_control_of, frame_count, open_run, read_frame, run_law, run_walls
 from ..io.inputs import require_file
 from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
@@ -234,9 +232,7 @@ def _refuse_non_finite(source: str, positions: np.ndarray, radii: np.ndarray, le
 
 def _granlab_state(f: h5py.File, index: int, path: str) -> PackingState:
     frame = read_frame(f, index)
-    params = parameters(f)
-    walls = walls_from_json(params["walls_json"])
-    law = ContactLaw(**json.loads(frame.get("law_json", params["law_json"])))
+    walls, law = run_walls(f), run_law(f, frame.get("law_json"))
     modes = tuple(WALL_MODES[m] for m in frame["wall_mode"]) if "wall_mode" in frame else tuple(w.mode for w in walls)
     c = frame["contacts"]
     contacts = ContactSnapshot(

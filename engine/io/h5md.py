@@ -38,7 +38,8 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..errors import GranLabError, OutputError, WriteFailed
+from ..checkpoint import HUGE, CheckpointError
+from ..errors import GranLabError, OutputError, WriteFailed, one_line
 from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
@@ -87,6 +88,17 @@ class RunFileError(GranLabError, OSError):
     """A run file that is missing, not HDF5, not H5MD, or lacks what was asked of it."""
 
 
+CHECKPOINT = "its checkpoint"
+
+
+class DamagedRunFile(RunFileError):
+    """A run file whose frame ``where`` (``frame 12``) is not as GranLab writes it: ``detail`` says how."""
+
+    def __init__(self, path: str, where: str, detail: str):
+        self.where, self.detail = where, f"{where}: {detail}"
+        super().__init__(f"{str(path)!r} is damaged ({self.detail})")
+
+
 def _extendable(group, name, shape, dtype, chunk_rows=64):
     """An empty dataset that grows along its first axis (an axis of length 0, e.g. no walls, is
     chunked as if it had length 1)."""
@@ -99,6 +111,16 @@ def append_row(dataset, value) -> None:
     n = dataset.shape[0]
     dataset.resize((n + 1,) + dataset.shape[1:])
     dataset[n] = value
+
+
+CHUNK_BYTES = 2 ** 20
+"""A per-disk element's chunk holds up to 16 frames, and no more than this many bytes unless one
+frame is larger: HDF5 gives a chunk its whole room at its first frame, and 16 frames of 4 million
+disks' positions made a run of two frames take 2.45 GB on disk."""
+
+
+def frames_per_chunk(frame_bytes: int) -> int:
+    return max(1, min(16, CHUNK_BYTES // max(frame_bytes, 1)))
 
 
 def time_dependent(group, name, shape, dtype=np.float64, chunk_rows=16):
@@ -152,6 +174,17 @@ def cell_from_json(text: str) -> PeriodicCell | None:
     if data is None:
         return None
     return PeriodicCell(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
+def run_file_bytes(sim: Simulation, frames: int) -> int:
+    """Bytes of a run file of ``sim`` holding ``frames`` frames (with its contacts of now) and its
+    two checkpoint slots, HDF5's metadata included."""
+    n = sim.particles.count
+    per_disk = sum(8 * int(np.prod(shape)) for _, shape in PARTICLE_ELEMENTS)
+    per_contact = sum(np.dtype(dtype).itemsize * int(np.prod(shape)) for _, dtype, shape in CONTACT_FIELDS)
+    frame = n * per_disk + sim.contacts.count * per_contact + 2 ** 12
+    checkpoint = sum(value.nbytes for value in sim.export_state().values())
+    return frames * frame + 2 * checkpoint + 2 ** 20
 
 
 def _reserve(sim: Simulation) -> int:
@@ -213,7 +246,7 @@ class RunWriter:
         box.attrs["boundary"] = np.array(["periodic" if p else "none" for p in sim.periodic], dtype="S8")
         time_dependent(box, "edges", (2,))
         for name, shape in PARTICLE_ELEMENTS:
-            time_dependent(particles, name, (n,) + shape)
+            time_dependent(particles, name, (n,) + shape, chunk_rows=frames_per_chunk(n * int(np.prod(shape)) * 8))
         particles.create_dataset("kind", data=sim.particles.kind)
         contacts = f.create_group("contacts")
         contacts.attrs["status_names"] = np.array(STATUS_NAMES, dtype="S12")
@@ -522,7 +555,7 @@ def _truncated(path: Path) -> RunFileError:
 def raised_by_damage(error: BaseException) -> bool:
     """Whether ``error`` tells of a damaged file: a read HDF5 could not do (it came out of h5py), or
     text in the file that does not decode."""
-    if isinstance(error, (json.JSONDecodeError, UnicodeDecodeError)):
+    if isinstance(error, (json.JSONDecodeError, UnicodeDecodeError, DamagedRunFile)):
         return True
     return isinstance(error, (OSError, KeyError, ValueError, RuntimeError)) and any(
         "/h5py/" in frame.filename for frame in traceback.extract_tb(error.__traceback__))
@@ -535,7 +568,8 @@ DAMAGE_SEARCH_SECONDS = 3.0
 def damaged(path: str | Path, error: BaseException) -> RunFileError:
     """The error that names a damaged file: what went wrong, and for a run file the last frame and
     the checkpoint that can still be read (each found without a hang: see :func:`open_run`)."""
-    reason = f"{type(error).__name__}: {str(error).strip(chr(39) + chr(34))}"
+    reason = error.detail if isinstance(error, DamagedRunFile) else \
+        f"{type(error).__name__}: {str(error).strip(chr(39) + chr(34))}"
     kept = ""
     try:
         with open_run(path) as f:
@@ -553,9 +587,10 @@ def damaged(path: str | Path, error: BaseException) -> RunFileError:
                 checkpoint = read_checkpoint(f)
             except Exception:
                 checkpoint = None
-        frames = (f"frames up to {last['index']} (t = {last['time']:.6g}) read whole" if last else
+        frames = (f"frame {last['index']} (t = {last['time']:.6g}) is the last that reads whole" if last else
                   "no frame reads whole" if tried == count else f"none of the last {tried} frames reads whole")
-        resume = f"a checkpoint at step {int(checkpoint['step'])}" if checkpoint else "no checkpoint"
+        resume = "no other checkpoint" if getattr(error, "where", "") == CHECKPOINT else \
+            f"a checkpoint at step {int(checkpoint['step'])}" if checkpoint else "no checkpoint"
         kept = f"; {frames}, {resume}"
     except Exception:  # not even its layout reads
         pass
@@ -584,7 +619,12 @@ def frame_count(f: h5py.File) -> int:
     for name in f["particles/all"]:
         element = f["particles/all"][name]
         if isinstance(element, h5py.Group) and "value" in element:
-            counts.extend(element[k].shape[0] for k in ("step", "time", "value"))
+            for key in ("step", "time", "value"):
+                data = element.get(key)
+                if not isinstance(data, h5py.Dataset) or data.ndim == 0:
+                    raise DamagedRunFile(f.filename, element.name, f"{key} is {'missing' if data is None else 'a scalar'}"
+                                                                   f"; one row per frame is needed")
+                counts.append(data.shape[0])
     if "contacts/offset" in f:
         counts.append(f["contacts/offset"].shape[0] - 1)
     count = min(counts)
@@ -604,36 +644,132 @@ def read_frame(f: h5py.File, index: int) -> dict:
         raise RunFileError(f"frame {index} is out of range: {f.filename!r} holds frames 0..{count - 1}")
     index %= count
     particles = f["particles/all"]
-    frame = {"index": index, "step": int(particles["position/step"][index]),
-             "time": float(particles["position/time"][index])}
+    source = (f.filename, f"frame {index}")
+    frame = {"index": index, "step": _number(particles, "position/step", index, source),
+             "time": _number(particles, "position/time", index, source)}
     for name in particles:
         element = particles[name]
         if isinstance(element, h5py.Group) and "value" in element:
             frame[name] = element["value"][index]
     if "box/edges" in particles:
         frame["edges"] = particles["box/edges/value"][index]
-        frame["boundary"] = [b.decode() if isinstance(b, bytes) else str(b) for b in particles["box"].attrs["boundary"]]
+        boundary = particles["box"].attrs.get("boundary")
+        if not isinstance(boundary, np.ndarray) or boundary.shape != (2,) or boundary.dtype.kind not in "SUO":
+            raise DamagedRunFile(*source, f"the box's boundary attribute is {boundary!r}; two of 'periodic', 'none' "
+                                 f"are needed")
+        frame["boundary"] = [b.decode() if isinstance(b, bytes) else str(b) for b in boundary]
     if "contacts/offset" in f:
-        lo, hi = f["contacts/offset"][index:index + 2]
-        frame["contacts"] = {name: f["contacts"][name][lo:hi] for name, _, _ in CONTACT_FIELDS}
+        frame["contacts"] = _frame_contacts(f, index, source)
     for key, path in FRAME_OBSERVABLES:
         if f"{path}/value" in f and f[f"{path}/value"].shape[0] > index:
             value = f[f"{path}/value"][index]
             frame[key] = value.decode() if isinstance(value, bytes) else value
+    if is_run_file(f):
+        check_frame(frame, source)
     return frame
+
+
+def _number(group: h5py.Group, name: str, index: int, source: tuple[str, str]) -> int | float:
+    """Frame ``index``'s step or time: a finite number."""
+    data = group[name]
+    if data.ndim != 1 or data.dtype.kind not in "iuf":
+        raise DamagedRunFile(*source, f"{data.name} is {data.dtype} of shape {data.shape}; a number per frame is needed")
+    value = data[index]
+    if not np.isfinite(value):
+        raise DamagedRunFile(*source, f"{data.name} is {value}; a finite number is needed")
+    return int(value) if data.dtype.kind in "iu" else float(value)
+
+
+def _frame_contacts(f: h5py.File, index: int, source: tuple[str, str]) -> dict:
+    """The contact table's rows of frame ``index``, between its offsets."""
+    offset = f["contacts/offset"]
+    if offset.ndim != 1 or offset.dtype.kind not in "iu":
+        raise DamagedRunFile(*source, f"/contacts/offset is {offset.dtype} of shape {offset.shape}; one whole "
+                             f"number per frame is needed")
+    lo, hi = (int(k) for k in offset[index:index + 2])
+    contacts = {}
+    for name, dtype, shape in CONTACT_FIELDS:
+        data = f["contacts"].get(name)
+        if not isinstance(data, h5py.Dataset) or data.shape[1:] != shape or data.dtype.kind != np.dtype(dtype).kind \
+                or not 0 <= lo <= hi <= data.shape[0]:
+            found = "missing" if data is None else f"{data.dtype} of shape {data.shape}"
+            raise DamagedRunFile(*source, f"/contacts/{name} is {found}; rows {lo} to {hi} of {np.dtype(dtype)} "
+                                 f"{('(rows, ' + str(shape[0]) + ')') if shape else '(rows,)'} are needed")
+        contacts[name] = data[lo:hi]
+    return contacts
+
+
+def check_frame(frame: dict, source: tuple[str, str]) -> None:
+    """A run file's frame as GranLab writes it: every disk element of one length, numbers, finite;
+    contacts between existing disks and walls. A damaged or edited file is refused here, by name,
+    before a picture, an export or an analysis is made of it."""
+    n = None
+    for name, shape in PARTICLE_ELEMENTS:
+        value = frame.get(name)
+        if value is None:
+            raise DamagedRunFile(*source, f"/particles/all/{name} is missing")
+        n = value.shape[0] if n is None and value.ndim else n
+        if value.shape != (n,) + shape or value.dtype.kind not in "iuf":
+            raise DamagedRunFile(*source, f"/particles/all/{name} is {value.dtype} of shape {value.shape}; numbers of "
+                                 f"shape {(n,) + shape} are needed")
+        bad = ~(np.abs(value) < HUGE) if name != "radius" else ~((value > 0) & (value < HUGE))
+        if bad.any():
+            disk = int(np.flatnonzero(bad.reshape(n, -1).any(axis=1))[0])
+            raise DamagedRunFile(*source, f"/particles/all/{name} of disk {disk} of {n} is {value[disk]}; "
+                                 f"{'positive radii' if name == 'radius' else 'finite numbers'} below 1e150 are "
+                                 f"needed (a run that diverged writes NaN: an earlier frame may be whole)")
+    edges = frame.get("edges")
+    if edges is None or "boundary" not in frame:
+        raise DamagedRunFile(*source, "/particles/all/box/edges or its boundary attribute is missing")
+    if edges.shape != (2,) or not np.all(np.abs(edges) < HUGE):
+        raise DamagedRunFile(*source, f"the box's edges are {edges.tolist()}; two finite lengths are needed")
+    walls = np.shape(frame.get("wall_position", ()))[0] if np.ndim(frame.get("wall_position", ())) else 0
+    contacts = frame.get("contacts")
+    if contacts is not None and len(contacts["pair"]):
+        pair = contacts["pair"]
+        if not (0 <= pair[:, 0].min() and pair[:, 0].max() < n and 0 <= pair[:, 1].min()
+                and pair[:, 1].max() < n + walls):
+            raise DamagedRunFile(*source, f"/contacts/pair joins {pair.min()} to {pair.max()}; disks 0 to {n - 1} and "
+                                 f"walls {n} to {n + walls - 1} are allowed")
+        status = contacts["status"]
+        if not (0 <= status.min() and status.max() < len(STATUS_NAMES)):
+            raise DamagedRunFile(*source, f"/contacts/status holds {status.min()} to {status.max()}; codes 0 to "
+                                 f"{len(STATUS_NAMES) - 1} are allowed")
+        for name, dtype, _ in CONTACT_FIELDS:
+            if np.dtype(dtype).kind == "f" and not np.all(np.abs(contacts[name]) < HUGE):
+                raise DamagedRunFile(*source, f"/contacts/{name} holds NaN, infinite or huge values; finite numbers "
+                                     f"are needed")
 
 
 def read_checkpoint(f: h5py.File) -> dict | None:
     """The last valid checkpoint of a run file as a state dict (``None`` if there is none)."""
     if "checkpoint/valid" not in f:
         return None
-    slot, _ = f["checkpoint/valid"][...]
+    valid = f["checkpoint/valid"]
+    if not isinstance(valid, h5py.Dataset) or valid.shape != (2,) or valid.dtype.kind not in "iu":
+        raise RunFileError(f"{f.filename!r}: /checkpoint/valid is damaged (two whole numbers, the slot and its step, "
+                           f"are needed)")
+    slot, _ = valid[...]
     if slot < 0:
         return None
-    group = f[f"checkpoint/slot{slot}"]
-    state = {}
-    group.visititems(lambda name, obj: state.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+    if f"checkpoint/slot{slot}" not in f:
+        raise RunFileError(f"{f.filename!r}: /checkpoint/valid names slot {slot}, which the file does not hold")
+    group, state, limit = f[f"checkpoint/slot{slot}"], {}, _declared_limit(f)
+
+    def read(name, item):
+        if isinstance(item, h5py.Dataset):
+            if item.size * item.dtype.itemsize > limit:
+                raise RunFileError(f"{f.filename!r}: checkpoint {name} declares shape {item.shape}, more than the "
+                                   f"file could hold: damaged")
+            state[name] = item[()]
+    group.visititems(read)
     return state
+
+
+def _declared_limit(f: h5py.File) -> int:
+    """The most bytes a dataset of ``f`` may declare: what its file's size could hold, compressed
+    as HDF5 compresses numbers; more is a damaged header, and reading it would exhaust memory."""
+    return 64 * os.path.getsize(f.filename) + 2 ** 20
 
 
 def lab_series(f: h5py.File) -> dict[str, tuple[tuple[str, ...], np.ndarray]]:
@@ -653,24 +789,66 @@ def parameters(f: h5py.File) -> dict:
     return {key: (value.decode() if isinstance(value, bytes) else value) for key, value in group.attrs.items()}
 
 
+def parsed_parameter(f: h5py.File, key: str, parse, text: str | None = None):
+    """``parse`` of the JSON parameter ``key`` (``text``: a frame's own, e.g. its law), a damaged
+    one named with what is wrong."""
+    try:
+        return parse(text if text is not None else parameters(f)[key])
+    except (GranLabError, KeyError, TypeError, ValueError, AttributeError) as error:
+        raise DamagedRunFile(f.filename, f"/parameters {key}", f"{type(error).__name__}: "
+                                                               f"{one_line(str(error))}") from None
+
+
+def _pair(value: np.ndarray) -> tuple[float, float]:
+    if value.shape != (2,) or not np.all(np.isfinite(value)):
+        raise ValueError(f"{value.tolist()} is not two finite numbers")
+    return tuple(value)
+
+
+def _table(value) -> dict:
+    if not isinstance(value, dict):
+        raise TypeError(f"a JSON object is needed, not {type(value).__name__}")
+    return value
+
+
+def run_walls(f: h5py.File) -> tuple[Wall, ...]:
+    return parsed_parameter(f, "walls_json", walls_from_json)
+
+
+def run_law(f: h5py.File, text: str | None = None) -> ContactLaw:
+    """The contact law of a run file, or the one in effect at a frame (its ``law_json``)."""
+    return parsed_parameter(f, "law_json", lambda value: ContactLaw(**json.loads(value)), text)
+
+
 def resume(path: str | Path) -> tuple[Simulation, dict]:
-    """A simulation restored from the last checkpoint of a run file, and the file's protocol record."""
+    """A simulation restored from the last checkpoint of a run file, and the file's protocol record;
+    a damaged checkpoint or parameters are refused, named (:mod:`granlab.engine.checkpoint`)."""
     with open_run(path) as f:
         state = read_checkpoint(f)
         if state is None:
             raise RunFileError(f"{str(path)!r} holds no checkpoint to resume from")
-        params = parameters(f)
-        scene = f["parameters/scene"][()]
-    law = ContactLaw(**json.loads(params["law_json"]))
-    integration = Integration(**json.loads(params["integration_json"]))
-    particles = ParticleState(state["particles/position"], state["particles/radius"], mass=state["particles/mass"],
-                              inertia=state["particles/inertia"], kind=state["particles/kind"])
-    sim = Simulation(particles, law, integration.replace(dt=float(state["dt"])),
-                     walls_from_json(params["walls_json"]), cell_from_json(params["cell_json"]),
-                     tuple(np.asarray(params["gravity"], dtype=float)), check_initial_overlap=False)
-    sim.restore_state(state)
-    record = json.loads(params["protocol_json"])
-    record["scene"] = scene.decode() if isinstance(scene, bytes) else str(scene)
+        law, walls = run_law(f), run_walls(f)
+        integration = parsed_parameter(f, "integration_json", lambda value: Integration(**json.loads(value)))
+        cell = parsed_parameter(f, "cell_json", cell_from_json)
+        gravity = parsed_parameter(f, "gravity", lambda value: _pair(np.asarray(value, dtype=float)))
+        record = parsed_parameter(f, "protocol_json", lambda value: _table(json.loads(value)))
+        scene = f["parameters/scene"][()] if "parameters/scene" in f else None
+        if not isinstance(scene, (bytes, str)):
+            raise DamagedRunFile(f.filename, "/parameters/scene", "missing or not text")
+    try:
+        for key in ("particles/position", "particles/radius", "particles/mass", "particles/inertia", "particles/kind",
+                    "dt"):
+            if key not in state:
+                raise CheckpointError(f"{key} is missing")
+        particles = ParticleState(state["particles/position"], state["particles/radius"], mass=state["particles/mass"],
+                                  inertia=state["particles/inertia"], kind=state["particles/kind"])
+        sim = Simulation(particles, law, integration.replace(dt=float(state["dt"])), walls, cell, gravity,
+                         check_initial_overlap=False)
+        sim.restore_state(state)
+    except (GranLabError, TypeError, ValueError) as error:
+        raise DamagedRunFile(path, CHECKPOINT, f"{one_line(str(error))}; an earlier run file or the scene itself "
+                                               f"can start again") from None
+    record["scene"] = scene.decode() if isinstance(scene, bytes) else scene
     return sim, record
 
 
@@ -680,7 +858,9 @@ def summary(path: str | Path) -> dict:
         frames = frame_count(f)
         info = {"run_file": str(path), "frames": frames}
         if "h5md" in f:
-            info["h5md_version"] = [int(v) for v in f["h5md"].attrs["version"]]
+            version = f["h5md"].attrs.get("version")
+            info["h5md_version"] = version.tolist() if isinstance(version, np.ndarray) and version.dtype.kind in "iu" \
+                else None
             info["creator"] = f["h5md/creator"].attrs.get("name", "")
         if frames:
             first, last = read_frame(f, 0), read_frame(f, -1)

@@ -13,7 +13,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import OutputError, WriteFailed
+from ..errors import GranLabError, OutputError, WriteFailed
 
 
 def occupied(path: Path) -> bool:
@@ -145,7 +145,8 @@ def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
             yield stage
         except (OSError, RuntimeError) as error:
             # a run file's writer says what stays readable of its file: here nothing of it stays
-            reason = error.reason if isinstance(error, WriteFailed) else failed_write_reason(error)
+            reason = error.reason if isinstance(error, WriteFailed) else \
+                None if isinstance(error, GranLabError) else failed_write_reason(error)  # an input's, not a write's
             if reason is None:
                 raise
             raise OutputError(f"writing {str(folder / last[0]) if last else str(folder)!r} failed: {reason}; nothing "

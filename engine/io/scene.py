@@ -18,7 +18,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .. import generate
+from .. import costs, generate
 from ..errors import ParameterError, SceneError
 from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls
 from ..simulation import Simulation
@@ -68,9 +68,12 @@ class Scene:
             raise SceneError(f"scene cannot start: {error}") from error
 
     def step_count(self, dt: float) -> int:
+        """Steps of ``dt`` the scene runs: its steps, or its duration's (at most :data:`costs.MAX_STEPS`)."""
         if self.steps is not None:
-            return self.steps
-        return int(round(self.duration / dt))
+            return costs.check_steps(self.steps, f"simulation.steps = {self.steps}", dt)
+        steps = self.duration / dt
+        return costs.check_steps(round(steps) if steps < math.inf else steps,
+                                 f"simulation.duration = {self.duration:.6g}", dt)
 
 
 def builtin_scenes() -> list[str]:

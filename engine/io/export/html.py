@@ -100,8 +100,8 @@ def read_run(run: h5py.File, indices: list[int]) -> dict:
     if "observables/cycles/cycle" in run and run["observables/cycles/cycle"].shape[0]:
         cycles = {name: run[f"observables/cycles/{name}"][()] for name in ("cycle", "time", "length_x", "length_y")}
     scene = run["parameters/scene"][()] if "parameters/scene" in run else b""
-    normals = [wall.normal for wall in h5md.walls_from_json(params["walls_json"])] if "walls_json" in params else []
-    return {"parameters": params, "protocol": json.loads(params.get("protocol_json") or "{}"),
+    normals = [wall.normal for wall in h5md.run_walls(run)] if "walls_json" in params else []
+    return {"parameters": params, "protocol": h5md.parsed_parameter(run, "protocol_json", json.loads) if "protocol_json" in params else {},
             "normals": np.asarray(normals, dtype=float).reshape(-1, 2),
             "series": h5md.lab_series(run), "energy": energy, "cycles": cycles,
             "scene": scene.decode() if isinstance(scene, bytes) else str(scene),

@@ -80,7 +80,7 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False,
         targets = writer.files(out, stem, indices)
         for target in targets:
             check_output(target, force=force, inputs=[path])
-        walls = run_files.walls_from_json(run_files.parameters(f)["walls_json"])
+        walls = run_files.run_walls(f)
         normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
         kind = f["particles/all/kind"][()] if "particles/all/kind" in f else None
         frames_read = (_Frame(run_files.read_frame(f, index), normals, kind) for index in indices)
