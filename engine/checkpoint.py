@@ -12,10 +12,8 @@ import numpy as np
 
 from .errors import GranLabError
 from .params import CELL_CONTROLS, WALL_MODES
-from .state import KIND_NAMES, STATUS_NAMES
+from .state import HUGE, KIND_NAMES, STATUS_NAMES
 
-HUGE = 1e150
-"""Values beyond this overflow when squared."""
 MAY_BE_INFINITE = {"particles/mass", "particles/inertia", "cell/mass", "cell/max_strain_rate"}
 """Parameters whose inf means "never": a disk that never moves or turns, no limit on the cell's rate."""
 CODES = {"particles/kind": (0, len(KIND_NAMES)), "walls/mode": (0, len(WALL_MODES)),

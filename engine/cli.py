@@ -81,7 +81,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         frame_every = frame_every or record.get("frame_every")
     else:
         scene = load_scene(name)
-        memory = costs.check_memory(scene.particles.count, "the scene")
+        memory = costs.simulation_memory(scene.particles.count)
         if memory >= costs.ANNOUNCE_BYTES:
             print(f"building {scene.particles.count} disks (up to {costs.size(memory)} of memory)", file=sys.stderr,
                   flush=True)

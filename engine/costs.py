@@ -75,7 +75,7 @@ def check_memory(disks: int, what: str) -> int:
     need, room = simulation_memory(disks), memory_room()
     if need > room:
         raise CostError(f"{what}: {disks} disks need about {size(need)} of memory ({MEMORY_PER_DISK} bytes a disk); "
-                        f"this machine has {size(max(room, 0))} free: use fewer disks")
+                        f"{size(max(room, 0))} is free to this process: use fewer disks")
     return need
 
 

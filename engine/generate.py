@@ -89,7 +89,7 @@ def random_gas(radius: np.ndarray, region, periodic=(False, False), seed: int = 
                                         placed_positions)
     if placed < radius.size:
         fraction = math.pi * float(np.sum(radius ** 2)) / ((x1 - x0) * (y1 - y0))
-        raise ParameterError("solid fraction", round(fraction, 4),
+        raise ParameterError("solid fraction (solid_fraction, or count × π r² / area)", round(fraction, 4),
                              f"a gas that random placement can reach (placed {placed} of {radius.size} disks); "
                              "use a lower solid fraction and compress")
     positions = np.empty_like(placed_positions)

@@ -89,6 +89,10 @@ def default_cell_mass(total_mass: float, lengths) -> float:
     return CELL_MASS_FRACTION * total_mass / math.sqrt(float(lengths[0]) * float(lengths[1]))
 
 
+HUGE = 1e150
+"""A disk's numbers stay below this in size: beyond, their squares (distances, energies) overflow."""
+
+
 def _column(name: str, value, n: int, default: float, width: int | None = None) -> np.ndarray:
     shape = (n,) if width is None else (n, width)
     if value is None:
@@ -98,9 +102,10 @@ def _column(name: str, value, n: int, default: float, width: int | None = None) 
         array = np.full(shape, float(array))
     if array.shape != shape:
         raise ParameterError(name, f"array of shape {array.shape}", f"shape {shape}")
-    if not np.all(np.isfinite(array)):
-        bad = int(np.flatnonzero(~np.isfinite(array).reshape(n, -1).all(axis=1))[0])
-        raise ParameterError(f"{name}[{bad}]", array[bad].tolist(), "finite numbers")
+    sound = np.abs(array) < HUGE
+    if not np.all(sound):
+        bad = int(np.flatnonzero(~sound.reshape(n, -1).all(axis=1))[0])
+        raise ParameterError(f"{name}[{bad}]", array[bad].tolist(), "finite numbers below 1e150 in size")
     return array
 
 

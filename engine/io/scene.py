@@ -10,6 +10,8 @@ and what is allowed.
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -22,7 +24,7 @@ from .. import costs, generate
 from ..errors import ParameterError, SceneError
 from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls
 from ..simulation import Simulation
-from ..state import ParticleState
+from ..state import HUGE, ParticleState
 from .inputs import require_file
 
 SIMULATION_KEYS = {"duration", "steps", "dt", "dt_safety", "skin", "max_overlap", "initial_overlap", "gravity",
@@ -59,19 +61,41 @@ class Scene:
     threads: int | None = None
     title: str = ""
     source: str = field(default="", repr=False)
+    owners: "Owners" = field(default_factory=lambda: Owners(), repr=False)
+    box_walls: int = 0
+    """How many of ``walls`` come from ``[box]`` (the first ones); the rest are ``[[walls]]``."""
 
     def build(self) -> Simulation:
-        """A new simulation of this scene (each call starts from the initial state)."""
+        """A new simulation of this scene (each call starts from the initial state); a scene that
+        cannot start, or whose disks would fly through each other in the first step, is refused
+        naming the tables of the disks and walls at fault."""
         try:
-            return Simulation(self.particles.copy(), self.law, self.integration, self.walls, self.cell, self.gravity)
+            sim = Simulation(self.particles.copy(), self.law, self.integration, self.walls, self.cell, self.gravity)
         except ParameterError as error:
-            raise SceneError(f"scene cannot start: {error}") from error
+            where = "simulation." if error.name in ("dt", "dt_safety") else ""
+            raise SceneError(f"scene cannot start: {where}{self._owned(str(error))}") from error
+        speed = np.hypot(*sim.particles.velocity.T) * sim.dt / sim.particles.radius
+        limit = 0.5 * sim.integration.max_overlap
+        if np.any(speed > limit):
+            disk = int(np.argmax(speed))
+            raise SceneError(f"[{self.owners.table(disk)}] vx, vy or velocity, velocity_spread: disk {disk} would move "
+                             f"{speed[disk]:.3g} of its radius in the first step of dt = {sim.dt:.4g}; at most "
+                             f"max_overlap / 2 = {limit:.3g} (it could pass through a neighbour)")
+        return sim
+
+    def _owned(self, message: str) -> str:
+        """``message`` with each disk and wall it names followed by the table that made it."""
+        names = {wall.name: "[box] x, y" if k < self.box_walls else f"[walls[{k - self.box_walls}]] position"
+                 for k, wall in enumerate(self.walls)}
+        message = re.sub(r"\bdisk (\d+)\b", lambda m: f"{m.group(0)} ([{self.owners.table(int(m.group(1)))}])",
+                         message)
+        return re.sub(r"\bwall '([^']*)'", lambda m: f"{m.group(0)} ({names.get(m.group(1), 'walls')})", message)
 
     def step_count(self, dt: float) -> int:
         """Steps of ``dt`` the scene runs: its steps, or its duration's (at most :data:`costs.MAX_STEPS`)."""
         if self.steps is not None:
             return costs.check_steps(self.steps, f"simulation.steps = {self.steps}", dt)
-        steps = self.duration / dt
+        steps = self.duration / dt if dt > 0 else math.inf
         return costs.check_steps(round(steps) if steps < math.inf else steps,
                                  f"simulation.duration = {self.duration:.6g}", dt)
 
@@ -102,11 +126,44 @@ def parse_scene(text: str, origin: str = "scene") -> Scene:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{origin} is not valid TOML: {error}") from error
+        places = _where(text)
+        said = re.sub(r"\(at line (\d+), column (\d+)\)",
+                      lambda m: f"at {places.get(int(m.group(1)), 'line ' + m.group(1))}, column {m.group(2)}",
+                      str(error))
+        raise SceneError(f"{origin} is not valid TOML: {said}") from error
+    except RecursionError:
+        raise SceneError(f"{origin} cannot be read: {_deepest(text)}") from None
     try:
-        return _scene(data, text)
+        with np.errstate(over="ignore", invalid="ignore"):  # what overflows is refused by name, not warned of
+            return _scene(data, text)
     except SceneError as error:
         raise SceneError(f"{origin}: {error}") from error
+
+
+def _where(text: str) -> dict[int, str]:
+    """Each line of ``text`` that starts a value or a table, as a person finds it: ``line 9
+    (gravity in [simulation])``."""
+    section, depth, places = "", 0, {}
+    for number, line in enumerate(text.splitlines(), 1):
+        header = re.fullmatch(r"\s*\[+\s*([^\]=]+?)\s*\]+\s*(#.*)?", line) if depth == 0 else None
+        key = re.match(r"\s*([\w.\-\"']+)\s*=", line) if depth == 0 else None
+        section = header.group(1) if header else section
+        what = f"[{section}]" if header else key.group(1) + (f" in [{section}]" if section else "") if key else ""
+        places[number] = f"line {number}" + (f" ({what})" if what else "")
+        depth = max(0, depth + sum((char in "[{") - (char in "]}") for char in line)) if not header else 0
+    return places
+
+
+def _deepest(text: str) -> str:
+    """Where ``text`` nests brackets deepest, as a reader that gave up on it would want to know."""
+    depth, deepest, start = 0, (0, 1), 1
+    for number, line in enumerate(text.splitlines(), 1):
+        start = number if depth == 0 else start
+        for char in line:
+            depth += (char in "[{") - (char in "]}")
+            deepest = max(deepest, (depth, start))
+    return (f"{_where(text)[deepest[1]]} nests arrays or inline tables {deepest[0]} deep, too deep for its "
+            f"reader; a scene needs two levels")
 
 
 # ---------------------------------------------------------------------------------------------- helpers
@@ -119,12 +176,26 @@ def _keys(table, path: str, allowed: set[str]) -> dict:
     return table
 
 
-def _number(table, key, path, default=None):
+_short = reprlib.Repr()  # its keyword arguments are Python 3.12's
+_short.maxlevel, _short.maxlist, _short.maxdict, _short.maxstring, _short.maxother = 2, 4, 4, 40, 40
+_shown = _short.repr
+"""A value in a message, cut short: a list nested 5000 deep is shown as ``[[...]]``."""
+
+
+def _sound(value, allow_inf=False) -> bool:
+    """A number, not NaN, below :data:`HUGE` in size (or infinite, where ``allow_inf``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return abs(value) < HUGE or allow_inf and math.isinf(value)
+
+
+def _number(table, key, path, default=None, allow_inf=False):
     value = table.get(key, default)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
-        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a number")
+    if not _sound(value, allow_inf):
+        raise SceneError(f"{path}.{key} = {_shown(value)} is not allowed: a number below 1e150 in size"
+                         + (" (or inf)" if allow_inf else ""))
     return float(value)
 
 
@@ -134,7 +205,7 @@ def _integer(table, key, path, default=None, minimum=None):
         return None
     if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
         allowed = "a whole number" + (f" >= {minimum}" if minimum is not None else "")
-        raise SceneError(f"{path}.{key} = {value!r} is not allowed: {allowed}")
+        raise SceneError(f"{path}.{key} = {_shown(value)} is not allowed: {allowed}")
     return value
 
 
@@ -142,16 +213,16 @@ def _vector(table, key, path, size=2, default=None):
     value = table.get(key, default)
     if value is None:
         return None
-    if not isinstance(value, list) or len(value) != size or \
-            any(isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) for v in value):
-        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a list of {size} numbers")
+    if not isinstance(value, list) or len(value) != size or not all(_sound(v) for v in value):
+        raise SceneError(f"{path}.{key} = {_shown(value)} is not allowed: a list of {size} numbers below 1e150 in "
+                         f"size")
     return tuple(float(v) for v in value)
 
 
 def _string(table, key, path, default=None):
     value = table.get(key, default)
     if value is not None and not isinstance(value, str):
-        raise SceneError(f"{path}.{key} = {value!r} is not allowed: a string")
+        raise SceneError(f"{path}.{key} = {_shown(value)} is not allowed: a string")
     return value
 
 
@@ -168,6 +239,9 @@ def _scene(data: dict, text: str) -> Scene:
     _keys(data, "scene", TOP_KEYS)
     sim = _keys(data.get("simulation", {}), "simulation", SIMULATION_KEYS)
     contact = _keys(data.get("contact", {}), "contact", CONTACT_KEYS)
+    for key, value in contact.items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and not _sound(value, allow_inf=True):
+            raise SceneError(f"contact.{key} = {value!r} is not allowed: a number below 1e150 in size")
     law = _build("contact", ContactLaw, **{key: contact[key] for key in contact})
     integration = _build("simulation", Integration, dt=_number(sim, "dt", "simulation"),
                          dt_safety=_number(sim, "dt_safety", "simulation"),
@@ -185,11 +259,11 @@ def _scene(data: dict, text: str) -> Scene:
     gravity = _vector(sim, "gravity", "simulation", default=[0.0, 0.0])
     cell = _cell(data["cell"]) if "cell" in data else None
     walls = _walls(data)
-    particles = _particles(data.get("particles"), cell, data.get("box"))
+    particles, owners = _particles(data.get("particles"), cell, data.get("box"))
     return Scene(particles=particles, law=law, integration=integration, walls=walls, cell=cell, gravity=gravity,
                  duration=duration, steps=steps, record_every=_integer(sim, "record_every", "simulation", 0, 0),
                  threads=_threads(sim), title=_string(data, "title", "scene", ""),
-                 source=text)
+                 source=text, owners=owners, box_walls=4 if "box" in data else 0)
 
 
 def _threads(sim) -> int | None:
@@ -216,8 +290,10 @@ def _walls(data) -> tuple[Wall, ...]:
             raise SceneError("[box] needs x = [x0, x1] and y = [y0, y1]")
         loads_table = _keys(box.get("loads", {}), "box.loads", {"left", "right", "bottom", "top"})
         loads = {name: _load(value, f"box.loads.{name}") for name, value in loads_table.items()}
-        walls.extend(_build("box", box_walls, x0=x[0], x1=x[1], y0=y[0], y1=y[1], loads=loads,
-                            wall_mass=_number(box, "wall_mass", "box")))
+        wall_mass = _number(box, "wall_mass", "box")
+        if wall_mass is not None and not wall_mass > 0:
+            raise SceneError(f"box.wall_mass = {wall_mass!r} is not allowed: a positive mass (that of each wall)")
+        walls.extend(_build("box", box_walls, x0=x[0], x1=x[1], y0=y[0], y1=y[1], loads=loads, wall_mass=wall_mass))
     entries = data.get("walls", [])
     if not isinstance(entries, list):
         raise SceneError("walls must be an array of tables: [[walls]]")
@@ -227,7 +303,7 @@ def _walls(data) -> tuple[Wall, ...]:
         per_length = entry.get("load_per_length_of")
         if per_length is not None and (not isinstance(per_length, list) or len(per_length) != 2
                                        or not all(isinstance(n, str) for n in per_length)):
-            raise SceneError(f"{path}.load_per_length_of = {per_length!r} is not allowed: two wall names")
+            raise SceneError(f"{path}.load_per_length_of = {_shown(per_length)} is not allowed: two wall names")
         walls.append(_build(path, Wall, normal=_vector(entry, "normal", path), position=_number(entry, "position", path),
                             mode=_string(entry, "mode", path), velocity=_number(entry, "velocity", path),
                             tangential_velocity=_number(entry, "tangential_velocity", path),
@@ -243,10 +319,10 @@ def _cell(table) -> PeriodicCell:
     periodic = table.get("periodic")
     if periodic is not None and (not isinstance(periodic, list) or len(periodic) != 2
                                  or not all(isinstance(p, bool) for p in periodic)):
-        raise SceneError(f"cell.periodic = {periodic!r} is not allowed: two booleans")
+        raise SceneError(f"cell.periodic = {_shown(periodic)} is not allowed: two booleans")
     control = table.get("control")
     if control is not None and (not isinstance(control, list) or len(control) != 2):
-        raise SceneError(f"cell.control = {control!r} is not allowed: two of fixed, stress, strain-rate")
+        raise SceneError(f"cell.control = {_shown(control)} is not allowed: two of fixed, stress, strain-rate")
     stress, strain_rate = _vector(table, "stress", "cell"), _vector(table, "strain_rate", "cell")
     for key, target, mode in (("stress", stress, "stress"), ("strain_rate", strain_rate, "strain-rate")):
         # a target on an axis not under its control would be ignored without a word
@@ -260,17 +336,22 @@ def _cell(table) -> PeriodicCell:
     return _build("cell", PeriodicCell, lengths=_vector(table, "lengths", "cell"),
                   periodic=tuple(periodic) if periodic else None, control=tuple(control) if control else None,
                   stress=stress, strain_rate=strain_rate,
-                  mass=_number(table, "mass", "cell"), max_strain_rate=_number(table, "max_strain_rate", "cell"))
+                  mass=_number(table, "mass", "cell"),
+                  max_strain_rate=_number(table, "max_strain_rate", "cell", allow_inf=True))
 
 
-def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
+def _particles(table, cell: PeriodicCell | None, box) -> tuple[ParticleState, "Owners"]:
     if table is None:
         raise SceneError("[particles] is missing: list disks with [[particles.disk]] or generate them")
     _keys(table, "particles", {"density", "disk", "lattice", "gas"})
     default_density = _number(table, "density", "particles", 1.0)
+    if not default_density > 0:
+        raise SceneError(f"particles.density = {default_density!r} is not allowed: a positive areal density")
     columns = {name: [] for name in ("position", "radius", "velocity", "omega", "angle", "mass", "inertia", "kind")}
+    owners: list[tuple[int, str]] = []  # (disks so far, the table that made them)
 
     def add(position, radius, velocity, omega, angle, mass, inertia, kind):
+        owners.append((owners[-1][0] + len(radius) if owners else len(radius), path))
         columns["position"].append(position)
         columns["radius"].append(radius)
         columns["velocity"].append(velocity)
@@ -280,6 +361,7 @@ def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
         columns["inertia"].append(inertia)
         columns["kind"].append(kind)
 
+    path = "particles"
     for k, disk in enumerate(_array(table, "disk")):
         path = f"particles.disk[{k}]"
         _keys(disk, path, DISK_KEYS)
@@ -292,7 +374,7 @@ def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
             raise SceneError(f"{path} takes mass or density, not both")
         density = _number(disk, "density", path, default_density)
         mass = _number(disk, "mass", path, density * math.pi * r * r)
-        inertia = _number(disk, "inertia", path, 0.5 * mass * r * r)
+        inertia = _number(disk, "inertia", path, 0.5 * mass * r * r, allow_inf=True)
         add(np.array([[x, y]]), np.array([r]), np.array([[_number(disk, "vx", path, 0.0), _number(disk, "vy", path, 0.0)]]),
             np.array([_number(disk, "omega", path, 0.0)]), np.array([_number(disk, "angle", path, 0.0)]),
             np.array([mass]), np.array([inertia]), [_string(disk, "kind", path, "dynamic")])
@@ -307,6 +389,7 @@ def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
         pattern = _string(group, "pattern", path, "square")
         if pattern not in ("square", "triangular"):
             raise SceneError(f"{path}.pattern = {pattern!r} is not allowed: 'square' or 'triangular'")
+        _check_memory(owners, rows * cols, path)
         maker = generate.square_lattice if pattern == "square" else generate.triangular_lattice
         spacing = _number(group, "spacing", path)
         if spacing is None:
@@ -337,8 +420,9 @@ def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
             area = (region[1] - region[0]) * (region[3] - region[2])
             count = _build(path, generate.gas_count_for_fraction, solid_fraction=fraction, area=area,
                            mean_square_radius=float(np.mean(sample ** 2)))
+        _check_memory(owners, count, path)
         radius = _radii(group, path, count)
-        seed = _integer(group, "seed", path, 0)
+        seed = _integer(group, "seed", path, 0, minimum=0)
         positions = _build(path, generate.random_gas, radius=radius, region=region, periodic=periodic, seed=seed)
         _add_group(add, group, path, positions, default_density, radius)
 
@@ -346,13 +430,46 @@ def _particles(table, cell: PeriodicCell | None, box) -> ParticleState:
         raise SceneError("[particles] holds no disks: add [[particles.disk]], [[particles.lattice]] or "
                          "[[particles.gas]]")
     kinds = [kind for group in columns["kind"] for kind in group]
+    with np.errstate(over="ignore"):  # a mass or a position that overflows is refused below, by its table
+        columns = {name: np.concatenate(values) for name, values in columns.items() if name != "kind"}
     try:
-        return ParticleState(np.vstack(columns["position"]), np.concatenate(columns["radius"]),
-                             velocity=np.vstack(columns["velocity"]), omega=np.concatenate(columns["omega"]),
-                             angle=np.concatenate(columns["angle"]), mass=np.concatenate(columns["mass"]),
-                             inertia=np.concatenate(columns["inertia"]), kind=kinds)
+        particles = ParticleState(columns["position"], columns["radius"], velocity=columns["velocity"],
+                                  omega=columns["omega"], angle=columns["angle"], mass=columns["mass"],
+                                  inertia=columns["inertia"], kind=kinds)
     except ParameterError as error:
-        raise SceneError(f"[particles] {error}") from error
+        found = re.fullmatch(r"(\w+)\[(\d+)\]", error.name)
+        if found is None:
+            raise SceneError(f"[particles] {error}") from error
+        owner = Owners(tuple(owners)).table(int(found.group(2)))
+        raise SceneError(f"[{owner}] {error} (from {MADE_FROM[found.group(1)]})") from error
+    return particles, Owners(tuple(owners))
+
+
+MADE_FROM = {"position": "x, y or spacing, origin, region", "radius": "r or radius, radius_min, radius_max",
+             "velocity": "vx, vy or velocity, velocity_spread", "omega": "omega", "angle": "angle",
+             "mass": "mass or density and r or radius", "inertia": "inertia", "kind": "kind"}
+"""The keys a disk's value is made from, in [[particles.disk]] or in a group."""
+
+
+@dataclass(frozen=True)
+class Owners:
+    """Which table of the scene made each disk: ``ends`` pairs (disks so far, table)."""
+
+    ends: tuple[tuple[int, str], ...] = ()
+
+    def table(self, disk: int) -> str:
+        return next((table for end, table in self.ends if disk < end), "particles")
+
+
+def _check_memory(owners: list[tuple[int, str]], more: int, path: str) -> None:
+    """Refuse, before they are made, disks this machine cannot simulate (with those made so far);
+    a group above the generators' own limit is left to them to refuse, naming it."""
+    if more > generate.MAX_DISKS:
+        return
+    try:
+        costs.check_memory((owners[-1][0] if owners else 0) + more, f"[{path}] rows × columns or count")
+    except costs.CostError as error:
+        raise SceneError(str(error)) from None
 
 
 def _array(table, key):
@@ -372,7 +489,7 @@ def _radii(group, path, count) -> np.ndarray:
         raise SceneError(f"{path} needs radius, or radius_min and radius_max (uniform distribution)")
     distribution = "constant" if radius is not None else "uniform"
     return _build(path, generate.radii, count=count, radius=radius, radius_min=lo, radius_max=hi,
-                  distribution=distribution, seed=_integer(group, "seed", path, 0))
+                  distribution=distribution, seed=_integer(group, "seed", path, 0, minimum=0))
 
 
 def _add_group(add, group, path, positions, default_density, radius=None):
@@ -388,6 +505,6 @@ def _add_group(add, group, path, positions, default_density, radius=None):
     if not spread >= 0:
         raise SceneError(f"{path}.velocity_spread = {spread!r} is not allowed: a standard deviation >= 0")
     if spread > 0:
-        velocity += np.random.default_rng(_integer(group, "seed", path, 0) + 1).normal(0.0, spread, (n, 2))
+        velocity += np.random.default_rng(_integer(group, "seed", path, 0, minimum=0) + 1).normal(0.0, spread, (n, 2))
     add(positions, radius, velocity, np.zeros(n), np.zeros(n), mass, 0.5 * mass * radius ** 2,
         [_string(group, "kind", path, "dynamic")] * n)
