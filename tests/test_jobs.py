@@ -99,23 +99,47 @@ def test_a_crashing_child_says_how_it_ended(jobs):
                                      "signal 6)")
 
 
-def saving_onto_a_full_disk(report, path):
-    """The lab's "Save run" of a 400-disk packing where only 20 kB more fit (a file size limit, as a full disk)."""
-    from granlab.app.lab.replay import write_run
+def saving(report, path, room):
+    """The lab's "Save run" of three frames of a 400-disk packing where only 20 kB more fit (a file
+    size limit, as a full disk); ``room``: what the look before the save finds (``None``: the same
+    20 kB; else that many bytes, the disk filled by another program while it saves)."""
+    from granlab.app.lab import replay
     from granlab.engine import ContactLaw, Integration, ParticleState, Simulation
     from granlab.engine.generate import square_lattice
 
     resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+    if room is not None:
+        replay.room_for_one_file = lambda folder: room
     sim = Simulation(ParticleState(square_lattice(20, 20, 1.0), np.full(400, 0.5)), ContactLaw(), Integration())
     frames = [(sim.snapshot(), "{}", "still")] * 3
-    return write_run(report, path, sim, True, frames, {}, {}, {}, [])
+    return replay.write_run(report, path, sim, True, frames, {}, {}, {}, [])
+
+
+def test_a_save_the_disk_cannot_hold_is_refused_before_it_starts(jobs, tmp_path):
+    runner, outcomes = jobs
+    runner.start("save", "saving run1.h5", saving, (tmp_path / "run1.h5", None))
+    assert outcomes.wait().error == ("saving run1.h5: 3 frames of 400 disks need up to 1.5 MB; 20 kB free in the "
+                                     "data folder")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_save_onto_a_full_disk_says_in_one_line_that_nothing_was_written(jobs, tmp_path):
     """Before: "... What was written before stays readable; ...; nothing was written under its name" (both)."""
     runner, outcomes = jobs
-    runner.start("save", "saving run1.h5", saving_onto_a_full_disk, (tmp_path / "run1.h5",))
+    runner.start("save", "saving run1.h5", saving, (tmp_path / "run1.h5", 10 ** 12))
     error = outcomes.wait().error
     assert error.startswith(f"writing {str(tmp_path / 'run1.h5')!r} failed: File too large; nothing was written"), error
     assert "stays readable" not in error and "\n" not in error
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_replay_this_machine_has_no_memory_for_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    from granlab.app.lab import replay
+
+    run = tmp_path / "run.h5"
+    run.write_bytes(bytes(2_000_000))
+    monkeypatch.setattr(replay.costs, "memory_room", lambda: 1_000_000)
+    with pytest.raises(GranLabError) as error:
+        replay.read_replay(lambda fraction: None, run)
+    assert str(error.value) == ("run.h5 (2 MB) needs about 6 MB of memory to replay; 1 MB is free: close other "
+                                "programs, or render it (granlab render)")

@@ -14,19 +14,22 @@ from pathlib import Path
 
 import numpy as np
 
+from granlab.engine import costs
 from granlab.engine.analysis.packing import packing_stats
 from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.analysis.states import PackingState, StateReader, detect_format, read_state
 from granlab.engine.errors import GranLabError
 from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.io import h5md
-from granlab.engine.io.outputs import staged
+from granlab.engine.io.outputs import room_for_one_file, staged
 from granlab.engine.protocols.presets import PRESETS
 
 
 MAX_REPLAY_BYTES = 2 * 2 ** 30
 """The largest file the lab replays: it holds every frame in memory (``granlab render`` and
 ``granlab analyze`` read larger files frame by frame)."""
+REPLAY_MEMORY_PER_BYTE = 3
+"""A replay holds every frame read (the file's bytes) and the frames drawn from them."""
 READ_SECONDS_PER_GIB = 120.0
 """How long reading a file may take, beyond a first minute: a reader that takes longer is given up."""
 
@@ -43,6 +46,10 @@ def read_replay(report, path: Path) -> "Replay":
         raise GranLabError(f"{path.name} is {size / 2 ** 30:.1f} GiB: the lab replays files up to "
                            f"{MAX_REPLAY_BYTES / 2 ** 30:.0f} GiB (it holds every frame in memory); granlab render and "
                            f"granlab analyze read larger ones frame by frame")
+    need, room = REPLAY_MEMORY_PER_BYTE * size, costs.memory_room()
+    if need > room:
+        raise GranLabError(f"{path.name} ({costs.size(size)}) needs about {costs.size(need)} of memory to replay; "
+                           f"{costs.size(max(room, 0))} is free: close other programs, or render it (granlab render)")
     return Replay(path, report)
 
 
@@ -212,6 +219,10 @@ def write_run(report, path: Path, sim, checkpoint: bool, frames: list, protocol:
     phase) triples, the lab's ``series`` (name -> columns) with their ``rows``, and the ``cycles``
     records of ``granlab info`` as (cycle, step, t, L_x, L_y, wall positions). Returns what was
     written, for the user."""
+    need, room = h5md.run_file_bytes(sim, len(frames)), room_for_one_file(path.parent)
+    if need > room:
+        raise GranLabError(f"saving {path.name}: {len(frames)} frames of {sim.particles.count} disks need up to "
+                           f"{costs.size(need)}; {costs.size(room)} free in the data folder")
     with staged(path.parent, last=[path.name]) as folder:  # a file appears in the list only once complete
         with h5md.RunWriter(folder / path.name, sim, protocol=protocol, lab_series=series, overwrite=True) as writer:
             for k, (snap, settings, phase) in enumerate(frames):
