@@ -10,20 +10,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import resource
-import signal
 import sys
-import time
-import traceback
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+from tests import forked
+
 DATA = Path(__file__).parent / "data" / "lammps"
-MEMORY_LIMIT = 3 * 2 ** 30
-"""A case's address space: a reader that trusts a declared size runs into it."""
 DEADLINE = 20.0
 
 WEIRD_NUMBERS = ("nan", "inf", "-inf", "1e308", "-1", "0", "1e30", "-0", "abc", "")
@@ -222,42 +217,13 @@ def h5md_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]
 
 
 def run_case(case: dict, folder: Path) -> dict:
-    """``granlab analyze ARGS packing --json`` in a child forked from this process (the engine
-    already imported: milliseconds a case, not seconds), its memory limited and its time bounded."""
+    """``granlab analyze ARGS packing --json`` in a forked child (:mod:`tests.forked`)."""
     from granlab.engine.cli import main
 
     out, err = folder / (case["name"] + ".out"), folder / (case["name"] + ".err")
-    start = time.perf_counter()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
-            os.dup2(os.open(out, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 1)
-            os.dup2(os.open(err, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 2)
-            code = main(["analyze", *case["args"], "packing", "--json"])
-        except SystemExit as exit_:
-            code = exit_.code if isinstance(exit_.code, int) else 1
-        except BaseException:
-            traceback.print_exc()
-        finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-    code = None
-    while time.perf_counter() - start < DEADLINE:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            code = os.waitstatus_to_exitcode(status)
-            break
-        time.sleep(0.005)
-    else:
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+    code, seconds = forked.run(main, ["analyze", *case["args"], "packing", "--json"], out, err, DEADLINE)
     stderr = err.read_text(errors="replace")
-    result = {"name": case["name"], "code": code, "seconds": time.perf_counter() - start,
+    result = {"name": case["name"], "code": code, "seconds": seconds,
               "stderr": stderr.splitlines(), "traceback": "Traceback" in stderr}
     if code == 0:
         result["report"] = json.loads(out.read_text())

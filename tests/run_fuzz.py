@@ -18,19 +18,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import resource
-import signal
 import sys
-import time
-import traceback
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-MEMORY_LIMIT = 3 * 2 ** 30
-"""A case's address space: a reader that trusts a declared size runs into it."""
+from tests import forked
+
 DEADLINE = 20.0
 
 SCENE = """title = "fuzz: 30 disks settle in a box"
@@ -290,44 +285,15 @@ def _sound(path: Path) -> bool:
 
 
 def run_case(case: dict, folder: Path) -> dict:
-    """``granlab ARGS`` in a child forked from this process (the engine already imported and its
-    kernels loaded), its memory limited and its time bounded."""
+    """``granlab ARGS`` in a forked child (:mod:`tests.forked`)."""
     from granlab.app.cli import main
 
     home = folder / case["name"]
     out, err = home / "stdout", home / "stderr"
-    start = time.perf_counter()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
-            os.dup2(os.open(out, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 1)
-            os.dup2(os.open(err, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 2)
-            code = main(case["args"])
-        except SystemExit as exit_:
-            code = exit_.code if isinstance(exit_.code, int) else 1
-        except BaseException:
-            traceback.print_exc()
-        finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-    code = None
-    while time.perf_counter() - start < DEADLINE:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            code = os.waitstatus_to_exitcode(status)
-            break
-        time.sleep(0.005)
-    else:
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+    code, seconds = forked.run(main, case["args"], out, err, DEADLINE)
     stderr = err.read_text(errors="replace")
     result = {key: case[key] for key in ("name", "kind", "command", "base", "what")}
-    result.update(code=code, seconds=time.perf_counter() - start, stderr=stderr.splitlines(),
+    result.update(code=code, seconds=seconds, stderr=stderr.splitlines(),
                   traceback="Traceback" in stderr, hang=code is None,
                   memory=any(word in stderr for word in ("MemoryError", "Unable to allocate", "bad_alloc")),
                   parts=sorted(str(p.relative_to(home)) for p in home.rglob(".*") if ".part" in p.name))

@@ -23,15 +23,12 @@ import json
 import math
 import os
 import re
-import resource
-import signal
 import sys
 import time
-import traceback
 from pathlib import Path
 
-MEMORY_LIMIT = 3 * 2 ** 30
-"""A case's address space: a scene that asks for more than this was not refused in time."""
+from tests import forked
+
 DEADLINE = 20.0
 """A small scene runs in a fraction of a second; an absurd one should be refused before any work."""
 WORKERS = 2
@@ -247,31 +244,13 @@ def named(line: str, keys: list[str], name: str) -> bool:
 
 
 def _start(case: dict, folder: Path) -> int:
-    """``granlab run SCENE --out RUN.h5`` in a child forked from this process (the engine and its
-    kernels already loaded: milliseconds a case, not seconds), its address space limited."""
+    """``granlab run SCENE --out RUN.h5`` in a forked child (:mod:`tests.forked`)."""
     from granlab.engine.cli import main
 
     run = folder / (case["name"] + ".h5")
     run.unlink(missing_ok=True)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
-            os.dup2(os.open(folder / (case["name"] + ".out"), os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 1)
-            os.dup2(os.open(folder / (case["name"] + ".err"), os.O_WRONLY | os.O_CREAT | os.O_TRUNC), 2)
-            code = main(["run", str(case["path"]), "--out", str(run)])
-        except SystemExit as exit_:
-            code = exit_.code if isinstance(exit_.code, int) else 1
-        except BaseException:
-            traceback.print_exc()
-        finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-    return pid
+    return forked.start(main, ["run", str(case["path"]), "--out", str(run)], folder / (case["name"] + ".out"),
+                        folder / (case["name"] + ".err"))
 
 
 def _result(case: dict, folder: Path, code, seconds: float, usage) -> dict:
@@ -339,11 +318,7 @@ def main(argv=None) -> int:
             case = cases.pop(0)
             running[_start(case, args.folder)] = (case, time.perf_counter())
         for pid, (case, start) in list(running.items()):
-            done, status, usage = os.wait4(pid, os.WNOHANG)
-            code = os.waitstatus_to_exitcode(status) if done else None
-            if not done and time.perf_counter() - start >= DEADLINE:
-                os.kill(pid, signal.SIGKILL)
-                done, status, usage = os.wait4(pid, 0)
+            done, code, usage = forked.ended(pid, start, DEADLINE)
             if done:
                 del running[pid]
                 print(json.dumps(_result(case, args.folder, code, time.perf_counter() - start, usage)), flush=True)
