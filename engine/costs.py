@@ -85,3 +85,25 @@ def check_steps(steps: float, what: str, dt: float) -> int:
         raise CostError(f"{what} is not allowed: {steps:.4g} steps of dt = {dt:.4g}, at most {MAX_STEPS:.0e} "
                         f"(a shorter run, or a larger time step: a lower stiffness or a higher mass)")
     return int(steps)
+
+
+FRAME_BYTES_PER_DISK = 200
+"""A frame of a run file, per disk: its six elements (64 bytes) and two contacts' rows (67 bytes each)."""
+CHECKPOINT_BYTES_PER_DISK = 310
+"""A checkpoint, per disk (302 bytes measured on lattices of 9·10⁴ and 10⁶ touching disks)."""
+
+
+def run_files_bytes(files: int, frames: int, disks: int) -> int:
+    """Up to how many bytes ``files`` run files of ``frames`` frames of ``disks`` disks take (two
+    checkpoint slots and HDF5's metadata each)."""
+    return files * (frames * (FRAME_BYTES_PER_DISK * disks + 2 ** 12) + 2 * CHECKPOINT_BYTES_PER_DISK * disks + 2 ** 20)
+
+
+def check_disk(need: int, folder, what: str) -> None:
+    """Refuse ``need`` bytes of files in ``folder`` (its nearest existing parent) beyond its free room."""
+    from .io.outputs import room_for_one_file
+
+    room = room_for_one_file(folder)
+    if need > room:
+        raise CostError(f"{what} need up to {size(need)}; {size(room)} free there: fewer samples, cycles or frames, "
+                        f"or another disk")

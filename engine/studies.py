@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import costs
 from .analysis.ratchet import (VERDICT_RULES, RatchetVerdict, deviatoric_strain, judge, ratchet_verdict,
                               share_statistics)
 from .errors import GranLabError, ParameterError
@@ -277,6 +278,9 @@ def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir
         for seed in seeds:
             for model in study.models:
                 check_output(sample_file(out_dir, model, seed), force=force)
+        files = study.samples * len(study.models)
+        costs.check_disk(costs.run_files_bytes(files, study.cycles // study.frame_every + 3, study.particles),
+                         Path(out_dir).absolute(), f"--out {out_dir}: {files} run files of {study.particles} disks")
         Path(out_dir).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     outcomes = run_tasks(ratchet_sample, [(study, seed, out_dir, force) for seed in seeds],
