@@ -350,8 +350,8 @@ def _particles(table, cell: PeriodicCell | None, box) -> tuple[ParticleState, "O
     columns = {name: [] for name in ("position", "radius", "velocity", "omega", "angle", "mass", "inertia", "kind")}
     owners: list[tuple[int, str]] = []  # (disks so far, the table that made them)
 
-    def add(position, radius, velocity, omega, angle, mass, inertia, kind):
-        owners.append((owners[-1][0] + len(radius) if owners else len(radius), path))
+    def add(table, position, radius, velocity, omega, angle, mass, inertia, kind):
+        owners.append((owners[-1][0] + len(radius) if owners else len(radius), table))
         columns["position"].append(position)
         columns["radius"].append(radius)
         columns["velocity"].append(velocity)
@@ -361,7 +361,6 @@ def _particles(table, cell: PeriodicCell | None, box) -> tuple[ParticleState, "O
         columns["inertia"].append(inertia)
         columns["kind"].append(kind)
 
-    path = "particles"
     for k, disk in enumerate(_array(table, "disk")):
         path = f"particles.disk[{k}]"
         _keys(disk, path, DISK_KEYS)
@@ -373,9 +372,11 @@ def _particles(table, cell: PeriodicCell | None, box) -> tuple[ParticleState, "O
         if "mass" in disk and "density" in disk:
             raise SceneError(f"{path} takes mass or density, not both")
         density = _number(disk, "density", path, default_density)
-        mass = _number(disk, "mass", path, density * math.pi * r * r)
-        inertia = _number(disk, "inertia", path, 0.5 * mass * r * r, allow_inf=True)
-        add(np.array([[x, y]]), np.array([r]), np.array([[_number(disk, "vx", path, 0.0), _number(disk, "vy", path, 0.0)]]),
+        mass = _number(disk, "mass", path) if "mass" in disk else \
+            _made(path, "mass = density × π r²", density * math.pi * r * r)
+        inertia = _number(disk, "inertia", path, allow_inf=True) if "inertia" in disk else \
+            _made(path, "inertia = mass r² / 2", 0.5 * mass * r * r)
+        add(path, np.array([[x, y]]), np.array([r]), np.array([[_number(disk, "vx", path, 0.0), _number(disk, "vy", path, 0.0)]]),
             np.array([_number(disk, "omega", path, 0.0)]), np.array([_number(disk, "angle", path, 0.0)]),
             np.array([mass]), np.array([inertia]), [_string(disk, "kind", path, "dynamic")])
 
@@ -472,6 +473,14 @@ def _check_memory(owners: list[tuple[int, str]], more: int, path: str) -> None:
         raise SceneError(str(error)) from None
 
 
+def _made(path: str, how: str, value: float) -> float:
+    """A disk's value made from others (its mass from its density and radius): refused, naming
+    how it is made, where it overflows, rather than taken for a value given as inf."""
+    if not abs(value) < HUGE:
+        raise SceneError(f"[{path}] {how} = {value:.4g} is not allowed: below 1e150 in size")
+    return value
+
+
 def _array(table, key):
     value = table.get(key, [])
     if not isinstance(value, list):
@@ -506,5 +515,5 @@ def _add_group(add, group, path, positions, default_density, radius=None):
         raise SceneError(f"{path}.velocity_spread = {spread!r} is not allowed: a standard deviation >= 0")
     if spread > 0:
         velocity += np.random.default_rng(_integer(group, "seed", path, 0, minimum=0) + 1).normal(0.0, spread, (n, 2))
-    add(positions, radius, velocity, np.zeros(n), np.zeros(n), mass, 0.5 * mass * radius ** 2,
+    add(path, positions, radius, velocity, np.zeros(n), np.zeros(n), mass, 0.5 * mass * radius ** 2,
         [_string(group, "kind", path, "dynamic")] * n)
