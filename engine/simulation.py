@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .checkpoint import check_state
+from .checkpoint import CheckpointError, check_state
 from .errors import DivergenceError, ParameterError
 from .kernels import gathered as k_gathered, integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
@@ -258,6 +258,19 @@ def side_by_side(snapshots: list[Snapshot], offsets) -> Snapshot:
                     cell_lengths=first.cell_lengths, box_lengths=first.box_lengths, periodic=first.periodic,
                     virial=sum(snap.virial for snap in snapshots), stress=first.stress, energy=energy, law=first.law,
                     dt=first.dt, cell_control=first.cell_control, cell_target_stress=first.cell_target_stress)
+
+
+def domain_lengths(cell_length, wall_names, wall_offset, position, radius) -> np.ndarray:
+    """Lengths of a simulation's domain (:meth:`Simulation.box_lengths`) from its arrays."""
+    edges = np.array(cell_length, dtype=float)
+    for axis, (low, high) in enumerate((("left", "right"), ("bottom", "top"))):
+        if edges[axis] > 0:
+            continue
+        if low in wall_names and high in wall_names:
+            edges[axis] = -(wall_offset[wall_names.index(low)] + wall_offset[wall_names.index(high)])
+        else:
+            edges[axis] = float(np.ptp(position[:, axis]) + 2.0 * radius.max())
+    return edges
 
 
 class Simulation:
@@ -666,6 +679,11 @@ class Simulation:
         walls), checked first (:func:`granlab.engine.checkpoint.check_state`): a state refused
         leaves this simulation as it was."""
         rows = check_state(state, self.export_state(), self.particles.count, self.walls.count)
+        lengths = domain_lengths(state["cell/length"], self.walls.names, state["walls/offset"],
+                                 state["particles/position"], state["particles/radius"])
+        if not np.all(lengths > 0):
+            raise CheckpointError(f"cell/length and walls/offset make a domain of lengths {lengths.tolist()}; "
+                                  f"positive lengths are needed")
         sources = {"particles": self.particles, "walls": self.walls, "cell": self.cell}
         for group, names in self.STATE_ARRAYS.items():
             for name in names:
@@ -747,16 +765,8 @@ class Simulation:
     def box_lengths(self) -> np.ndarray:
         """Lengths of the domain: periodic lengths, the distance between the walls named
         left/right (bottom/top), or else the extent of the disks along the axis."""
-        edges = np.array(self.cell.length, dtype=float)
-        names = self.walls.names
-        for axis, (low, high) in enumerate((("left", "right"), ("bottom", "top"))):
-            if edges[axis] > 0:
-                continue
-            if low in names and high in names:
-                edges[axis] = -(self.walls.offset[names.index(low)] + self.walls.offset[names.index(high)])
-            else:
-                edges[axis] = float(np.ptp(self.particles.position[:, axis]) + 2.0 * self.particles.radius.max())
-        return edges
+        return domain_lengths(self.cell.length, self.walls.names, self.walls.offset, self.particles.position,
+                              self.particles.radius)
 
     def stress(self) -> np.ndarray:
         """Mean stress ``(sum m v ⊗ v + sum_contacts f ⊗ r) / A`` (2 × 2, compression positive) over
