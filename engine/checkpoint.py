@@ -97,6 +97,9 @@ def _check_indices(state: dict, rows: int, disks: int, walls: int) -> None:
     if not (0 <= j.min() and j.max() < disks + walls):
         raise CheckpointError(f"contacts/particle_j holds {j.min()} to {j.max()}; disks and walls 0 to "
                               f"{disks + walls - 1} are allowed")
+    if not np.all(i < j):
+        row = int(np.flatnonzero(i >= j)[0])
+        raise CheckpointError(f"contact {row} joins {i[row]} to {j[row]}; particle_i < particle_j is needed")
 
 
 def _check_inverses(state: dict) -> None:
