@@ -1062,7 +1062,12 @@ def _handle(args):
     """The command's result, or the GranLabError that tells why there is none."""
     from .compilation import announced
 
+    source = next((getattr(args, name) for name in ("runfile", "resume") if getattr(args, name, None)), None)
     try:
+        if source is not None and Path(source).is_file():
+            from .io import h5md
+
+            h5md.probe(source)
         with announced():
             return args.handler(args)
     except WriteFailed as error:
@@ -1072,7 +1077,6 @@ def _handle(args):
     except Exception as error:
         from .io import h5md
 
-        source = next((getattr(args, name) for name in ("runfile", "resume") if getattr(args, name, None)), None)
         if isinstance(error, GranLabError) and not (source and isinstance(error, h5md.DamagedRunFile)):
             return error
         if source is None or not h5md.raised_by_damage(error):

@@ -81,16 +81,14 @@ class Replay:
             self.count = h5md.frame_count(f)
             if self.count == 0:
                 raise h5md.RunFileError(f"{path.name} holds no complete frame to replay")
-            params, walls = h5md.parameters(f), h5md.run_walls(f)
+            walls, protocol = h5md.run_walls(f), h5md.run_protocol(f)
             self.normals = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
             self.frames = []
             for k in range(self.count):
                 self.frames.append(h5md.read_frame(f, k))
                 report((k + 1) / self.count)
-            fields = tuple(x.decode() for x in f["observables/energy"].attrs["fields"])
-            energy = f["observables/energy/value"][: self.count]
+            energy = {name: values[: self.count] for name, values in h5md.energy_series(f).items()}
             lab = h5md.lab_series(f)
-        protocol = json.loads(params.get("protocol_json", "{}"))
         self.times = np.array([frame["time"] for frame in self.frames])
         self.of = protocol.get("lab_preset") if protocol.get("lab_preset") in PRESETS and lab else None
         span = float(self.times[-1] - self.times[0])
@@ -100,7 +98,7 @@ class Replay:
         self.speed = float(settings.get("speed", 1.0)) if isinstance(settings.get("speed"), (int, float)) else 1.0
         steps = np.array([frame["step"] for frame in self.frames], dtype=float)
         self.series: dict[str, tuple[tuple[str, ...], np.ndarray]] = {
-            "replay": (("t", "step") + fields, np.column_stack([self.times, steps, energy]))}
+            "replay": (("t", "step") + tuple(energy), np.column_stack([self.times, steps, *energy.values()]))}
         self.series.update(lab)
         self.plot = "replay-energy"
         self.time_label = "t"

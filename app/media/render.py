@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import json
 import math
 import re
 import time
@@ -608,17 +607,13 @@ def _write_mp4(images: Iterator[np.ndarray], out: Path, size: tuple[int, int], f
     return count
 
 
-def _protocol(f) -> dict:
-    return json.loads(h5md.parameters(f).get("protocol_json", "{}") or "{}")
-
-
 def run_frames(f, indices: Iterable[int]) -> Iterator[tuple[SceneFrame, str]]:
     """(SceneFrame, caption) of each frame ``indices`` of an open GranLab run file ``f``, with
     the contacts the lab watched (a lab run's), its views named (the closed path's pairs) and the
     phase of its protocol in the caption."""
     walls = h5md.run_walls(f)
     normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
-    protocol = _protocol(f)
+    protocol = h5md.run_protocol(f)
     watched = [tuple(pair) for pair in protocol.get("watched", [])]
     groups = [tuple(group) for group in protocol.get("views", [])]
     for index in indices:
@@ -637,7 +632,7 @@ def default_movie_frames(f, count: int) -> list[int]:
     """The frames of a movie made without ``--frames``: those of the last MOVIE_CYCLES cycles
     (the lab's ``cycle_time`` or a study's ``period`` in the file's protocol), else the last
     MOVIE_FRAMES."""
-    protocol = _protocol(f)
+    protocol = h5md.run_protocol(f)
     cycle = protocol.get("cycle_time") or protocol.get("period")
     if isinstance(cycle, (int, float)) and cycle > 0:
         times = f["particles/all/position/time"][:count]
@@ -684,7 +679,7 @@ def render_run(path, out, frames=None, size="1280x720", color_field: str = "rota
             frames_read = reporting(frames_read, len(indices), progress)
         with staged(out.parent, last=[out.name]) as folder:
             written = write_movie(frames_read, folder / out.name, size, color_field, forces, fps, bounds, indices,
-                                  _protocol(f).get("watched_labels", []))
+                                  h5md.run_protocol(f).get("watched_labels", []))
         if progress is not None:
             progress(len(indices), len(indices))
     return {"run_file": str(path), "out": str(out), "files": [str(target) for target in targets], "frames": written,

@@ -28,7 +28,9 @@ import functools
 import json
 import os
 import resource
+import signal
 import struct
+import sys
 import time
 import traceback
 import weakref
@@ -561,6 +563,50 @@ def raised_by_damage(error: BaseException) -> bool:
         "/h5py/" in frame.filename for frame in traceback.extract_tb(error.__traceback__))
 
 
+PROBE_SECONDS = 10.0
+"""How long a file's metadata may take to read in :func:`probe` (a sound file's takes milliseconds)."""
+
+
+def probe(path: str | Path, seconds: float = PROBE_SECONDS) -> None:
+    """Read every object's name and attributes of the HDF5 file ``path`` in a child process first:
+    on some damaged metadata HDF5 loops for ever, holding Python's lock, where no thread or signal
+    of this process can stop it (a zeroed page of a run file made ``run --resume`` wait for ever on
+    its /parameters). A child that does not finish in ``seconds`` is killed and the file named
+    damaged. What else is wrong the real read says. For a command's process, before it starts
+    threads: a fork copies none of them."""
+    if not h5py.is_hdf5(path):
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), 2)
+            with open_run(path) as f:
+                for look in (lambda: parameters(f), lambda: frame_count(f), lambda: f["checkpoint/valid"][...],
+                             lambda: [item.attrs.get(name) for item in [f, *_objects(f)] for name in item.attrs]):
+                    try:
+                        look()
+                    except Exception:  # the real read names it
+                        pass
+        finally:
+            os._exit(0)
+    give_up = time.monotonic() + seconds
+    while not os.waitpid(pid, os.WNOHANG)[0]:
+        if time.monotonic() > give_up:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            raise RunFileError(f"{str(path)!r} is damaged: reading its metadata did not end in {seconds:.0f} s "
+                               f"(HDF5 loops for ever on some damaged files)")
+        time.sleep(0.005)
+
+
+def _objects(f: h5py.File) -> list:
+    found = []
+    f.visititems(lambda name, item: found.append(item))
+    return found
+
+
 DAMAGE_SEARCH_SECONDS = 3.0
 """How long :func:`damaged` looks back through a damaged file's frames for one that reads whole."""
 
@@ -584,13 +630,13 @@ def damaged(path: str | Path, error: BaseException) -> RunFileError:
                     if time.monotonic() > give_up:
                         break
             try:
-                checkpoint = read_checkpoint(f)
+                checkpoint = checkpoint_step(f)
             except Exception:
                 checkpoint = None
         frames = (f"frame {last['index']} (t = {last['time']:.6g}) is the last that reads whole" if last else
                   "no frame reads whole" if tried == count else f"none of the last {tried} frames reads whole")
         resume = "no other checkpoint" if getattr(error, "where", "") == CHECKPOINT else \
-            f"a checkpoint at step {int(checkpoint['step'])}" if checkpoint else "no checkpoint"
+            f"a checkpoint at step {checkpoint}" if checkpoint is not None else "no checkpoint"
         kept = f"; {frames}, {resume}"
     except Exception:  # not even its layout reads
         pass
@@ -621,12 +667,18 @@ def frame_count(f: h5py.File) -> int:
         if isinstance(element, h5py.Group) and "value" in element:
             for key in ("step", "time", "value"):
                 data = element.get(key)
-                if not isinstance(data, h5py.Dataset) or data.ndim == 0:
-                    raise DamagedRunFile(f.filename, element.name, f"{key} is {'missing' if data is None else 'a scalar'}"
-                                                                   f"; one row per frame is needed")
+                numbers = key == "value" or isinstance(data, h5py.Dataset) and data.dtype.kind in "iuf"
+                if not isinstance(data, h5py.Dataset) or data.ndim == 0 or not numbers:
+                    found = "missing" if data is None else "a group" if isinstance(data, h5py.Group) else \
+                        f"{data.dtype} of shape {data.shape}"
+                    raise DamagedRunFile(f.filename, element.name, f"{key} is {found}; a row per frame is needed"
+                                                                   + ("" if key == "value" else ", a number"))
                 counts.append(data.shape[0])
     if "contacts/offset" in f:
-        counts.append(f["contacts/offset"].shape[0] - 1)
+        offset = f["contacts/offset"]
+        if not isinstance(offset, h5py.Dataset) or offset.ndim != 1:
+            raise DamagedRunFile(f.filename, "/contacts/offset", "one whole number per frame is needed")
+        counts.append(offset.shape[0] - 1)
     count = min(counts)
     if is_run_file(f) and count > 1:
         back = np.flatnonzero(np.diff(f["particles/all/position/step"][:count]) < 0)
@@ -721,8 +773,8 @@ def check_frame(frame: dict, source: tuple[str, str]) -> None:
     edges = frame.get("edges")
     if edges is None or "boundary" not in frame:
         raise DamagedRunFile(*source, "/particles/all/box/edges or its boundary attribute is missing")
-    if edges.shape != (2,) or not np.all(np.abs(edges) < HUGE):
-        raise DamagedRunFile(*source, f"the box's edges are {edges.tolist()}; two finite lengths are needed")
+    if edges.shape != (2,) or edges.dtype.kind not in "iuf" or not np.all((edges > 0) & (edges < HUGE)):
+        raise DamagedRunFile(*source, f"the box's edges are {edges.tolist()}; two positive lengths are needed")
     walls = np.shape(frame.get("wall_position", ()))[0] if np.ndim(frame.get("wall_position", ())) else 0
     contacts = frame.get("contacts")
     if contacts is not None and len(contacts["pair"]):
@@ -741,17 +793,30 @@ def check_frame(frame: dict, source: tuple[str, str]) -> None:
                                      f"are needed")
 
 
-def read_checkpoint(f: h5py.File) -> dict | None:
-    """The last valid checkpoint of a run file as a state dict (``None`` if there is none)."""
+def _valid_checkpoint(f: h5py.File) -> tuple[int, int] | None:
+    """The slot and step of a run file's last valid checkpoint (``None`` if there is none)."""
     if "checkpoint/valid" not in f:
         return None
     valid = f["checkpoint/valid"]
     if not isinstance(valid, h5py.Dataset) or valid.shape != (2,) or valid.dtype.kind not in "iu":
         raise RunFileError(f"{f.filename!r}: /checkpoint/valid is damaged (two whole numbers, the slot and its step, "
                            f"are needed)")
-    slot, _ = valid[...]
-    if slot < 0:
+    slot, step = (int(value) for value in valid[...])
+    return None if slot < 0 else (slot, step)
+
+
+def checkpoint_step(f: h5py.File) -> int | None:
+    """The step of a run file's last valid checkpoint, read without reading the checkpoint."""
+    found = _valid_checkpoint(f)
+    return None if found is None else found[1]
+
+
+def read_checkpoint(f: h5py.File) -> dict | None:
+    """The last valid checkpoint of a run file as a state dict (``None`` if there is none)."""
+    found = _valid_checkpoint(f)
+    if found is None:
         return None
+    slot, _ = found
     if f"checkpoint/slot{slot}" not in f:
         raise RunFileError(f"{f.filename!r}: /checkpoint/valid names slot {slot}, which the file does not hold")
     group, state, limit = f[f"checkpoint/slot{slot}"], {}, _declared_limit(f)
@@ -809,6 +874,27 @@ def _table(value) -> dict:
     if not isinstance(value, dict):
         raise TypeError(f"a JSON object is needed, not {type(value).__name__}")
     return value
+
+
+def run_protocol(f: h5py.File) -> dict:
+    """What was run (the JSON record of ``protocol_json``), ``{}`` for a file without one."""
+    if "protocol_json" not in parameters(f):
+        return {}
+    return parsed_parameter(f, "protocol_json", lambda value: _table(json.loads(value)))
+
+
+def energy_series(f: h5py.File) -> dict[str, np.ndarray]:
+    """The energy budget of each frame, by name (:data:`ENERGY_FIELDS`); ``{}`` for a file without."""
+    if "observables/energy/value" not in f:
+        return {}
+    fields, values = f["observables/energy"].attrs.get("fields"), f["observables/energy/value"]
+    names = [name.decode() if isinstance(name, bytes) else name for name in np.atleast_1d(fields)] \
+        if isinstance(fields, np.ndarray) else []
+    if names != list(ENERGY_FIELDS) or values.ndim != 2 or values.shape[1] != len(names) or values.dtype.kind != "f":
+        raise DamagedRunFile(f.filename, "/observables/energy", f"its fields or values are not those GranLab writes "
+                                                                f"({', '.join(ENERGY_FIELDS)})")
+    data = values[()]
+    return {name: data[:, k] for k, name in enumerate(names)}
 
 
 def run_walls(f: h5py.File) -> tuple[Wall, ...]:
@@ -870,13 +956,12 @@ def summary(path: str | Path) -> dict:
             params = parameters(f)
             info["parameters"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in params.items()
                                   if not k.endswith("_json")}
-            info["protocol"] = json.loads(params.get("protocol_json", "{}"))
-        if "observables/energy" in f and f["observables/energy/value"].shape[0]:
-            fields = [x.decode() for x in f["observables/energy"].attrs["fields"]]
-            info["energy_last"] = dict(zip(fields, map(float, f["observables/energy/value"][-1])))
+            info["protocol"] = run_protocol(f)
+        energy = energy_series(f)
+        if energy and len(energy["kinetic"]):
+            info["energy_last"] = {name: float(values[-1]) for name, values in energy.items()}
         if "observables/cycles/cycle" in f:
             info["cycles"] = int(f["observables/cycles/cycle"].shape[0])
-        state = read_checkpoint(f)
-        info["checkpoint_step"] = None if state is None else int(state["step"])
+        info["checkpoint_step"] = checkpoint_step(f)
     return info
 

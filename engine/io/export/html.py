@@ -91,17 +91,13 @@ def read_run(run: h5py.File, indices: list[int]) -> dict:
     """What the page needs of the run beyond its frames: parameters, the lab's protocol and series,
     the energy of each frame and the cycle records."""
     params = h5md.parameters(run)
-    energy = None
-    if "observables/energy/value" in run:
-        fields = [f.decode() if isinstance(f, bytes) else str(f) for f in run["observables/energy"].attrs["fields"]]
-        values = run["observables/energy/value"][()]
-        energy = {name: values[indices, k] for k, name in enumerate(fields)}
+    energy = {name: values[indices] for name, values in h5md.energy_series(run).items()} or None
     cycles = None
     if "observables/cycles/cycle" in run and run["observables/cycles/cycle"].shape[0]:
         cycles = {name: run[f"observables/cycles/{name}"][()] for name in ("cycle", "time", "length_x", "length_y")}
     scene = run["parameters/scene"][()] if "parameters/scene" in run else b""
     normals = [wall.normal for wall in h5md.run_walls(run)] if "walls_json" in params else []
-    return {"parameters": params, "protocol": h5md.parsed_parameter(run, "protocol_json", json.loads) if "protocol_json" in params else {},
+    return {"parameters": params, "protocol": h5md.run_protocol(run),
             "normals": np.asarray(normals, dtype=float).reshape(-1, 2),
             "series": h5md.lab_series(run), "energy": energy, "cycles": cycles,
             "scene": scene.decode() if isinstance(scene, bytes) else str(scene),
