@@ -388,3 +388,22 @@ def test_a_diverging_cli_run_writes_its_restored_last_good_state_as_the_last_che
                                            f"It is the last checkpoint of {out}.")
     info = h5md.summary(out)
     assert info["checkpoint_step"] == info["last_step"] == 90  # periodic checkpoints were at steps 30 and 70
+
+
+def test_a_file_whose_metadata_hdf5_reads_for_ever_is_named_damaged_after_ten_seconds(tmp_path):
+    """A page zeroed at 4096 bytes of a run file: HDF5 looped for ever reading its /parameters,
+    holding Python's lock, so that neither a thread nor SIGTERM could stop `run --resume`."""
+    from tests import run_fuzz
+
+    done = run_fuzz.make_bases(tmp_path)["done"]
+    data = bytearray(done.read_bytes())
+    data[4096:8192] = bytes(4096)
+    damaged = tmp_path / "damaged.h5"
+    damaged.write_bytes(bytes(data))
+    start = time.perf_counter()
+    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", "--resume", str(damaged)],
+                             capture_output=True, text=True, timeout=120)
+    assert time.perf_counter() - start < 30
+    assert process.returncode == 2 and process.stderr.count("\n") == 1, process.stderr
+    # where HDF5 loops, that is what is said; elsewhere the damage is named
+    assert process.stderr.startswith(f"granlab run: error: {str(damaged)!r} is damaged"), process.stderr
