@@ -662,8 +662,9 @@ def frame_count(f: h5py.File) -> int:
     if "particles/all/position" not in f:
         raise RunFileError(f"{f.filename!r} has no /particles/all/position: not an H5MD particle file")
     counts = []
-    for name in f["particles/all"]:
-        element = f["particles/all"][name]
+    particles = f["particles/all"]
+    elements = [particles[name] for name in particles] + ([particles["box/edges"]] if "box/edges" in particles else [])
+    for element in elements:
         if isinstance(element, h5py.Group) and "value" in element:
             for key in ("step", "time", "value"):
                 data = element.get(key)
