@@ -131,12 +131,20 @@ def write(frames, out: Path, stem: str, indices: list[int], run: dict) -> None:
 
 def _constants(params: dict) -> list[list[str]]:
     """The law's stiffnesses and the time step (the lab's settings leave them out: they do not change)."""
-    items = [[key, f"{name} = {_value_text(float(params[f'contact.{key}']))}"]
+    items = [[key, f"{name} = {_value_text(_number(params, f'contact.{key}'))}"]
              for key, name in (("normal_stiffness", "K_n"), ("tangential_stiffness", "K_t"))
              if f"contact.{key}" in params]
     if "dt" in params:
-        items.append(["dt", f"time step dt = {_compact(float(params['dt']))}"])
+        items.append(["dt", f"time step dt = {_compact(_number(params, 'dt'))}"])
     return items
+
+
+def _number(params: dict, key: str) -> float:
+    value = params[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(value):
+        raise h5md.RunFileError(f"the run file's parameter {key} is {value!r}; a finite number is needed")
+    return float(value)
 
 
 def _escape(text: str) -> str:
