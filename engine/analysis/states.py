@@ -37,7 +37,7 @@ from ..io.inputs import require_file
 from ..io.lammps import ATOM_ITEM, LOCAL_ITEM, Dump
 from ..params import WALL_MODES, ContactLaw
 from ..simulation import ContactSnapshot, Snapshot
-from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
+from ..state import HUGE, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 CONTACT_GAP = 1e-6
 """Generic H5MD files: disks closer than this fraction of the mean diameter touch."""
@@ -211,8 +211,6 @@ def _check_finite(state: PackingState) -> None:
 DECLARED_SIZE_FACTOR = 64
 """A foreign H5MD dataset may declare at most this many times its file's size (compression of
 floating-point positions gains far less): a larger one is damaged, and reading it would exhaust memory."""
-HUGE = 1e150
-"""Values beyond this overflow when squared: refused with the non-finite ones."""
 
 
 def _refuse_non_finite(source: str, positions: np.ndarray, radii: np.ndarray, lengths: np.ndarray) -> None:
