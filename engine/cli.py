@@ -33,7 +33,7 @@ from pathlib import Path
 
 from . import costs
 from .analysis import ANALYSES, LOADS
-from .errors import DivergenceError, GranLabError, ParameterError, WriteFailed, one_line
+from .errors import DivergenceError, GranLabError, ParameterError, RegistryError, WriteFailed, one_line
 from .params import CELL_MASS_READINGS, GILABERT_DT_SAFETY, TANGENTIAL, TANGENTIAL_MODELS
 from .reproduce import REPRODUCTIONS, ROLLING_CASES
 
@@ -1070,6 +1070,8 @@ def _handle(args):
             h5md.probe(source)
         with announced():
             return args.handler(args)
+    except RegistryError as error:  # the engine does not import: a run file cannot be judged with it
+        return error
     except WriteFailed as error:
         print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr, flush=True)
         sys.stdout.flush()

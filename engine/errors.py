@@ -62,3 +62,12 @@ class WriteFailed(OutputError):
         super().__init__(message)
         self.reason = reason
 
+
+
+class RegistryError(GranLabError, ImportError):
+    """A part named in a registry (a contact law, a tangential model) whose module lacks what every
+    part of its family defines: it does not register, and the engine does not import."""
+
+    def __init__(self, family: str, name: str, module: str, missing: list[str], needed: str):
+        super().__init__(f"{family} {name!r} does not register: its module {module} has no "
+                         f"{', '.join(missing)} (each one defines {needed})")

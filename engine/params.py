@@ -68,12 +68,19 @@ class NormalModel:
     title: str
     label: str
 
+    @property
+    def key(self) -> str:
+        """The name as an identifier (the law's module in :mod:`granlab.engine.kernels.normal`)."""
+        return self.name.replace("-", "_")
+
 
 NORMAL = {model.name: model for model in (
     NormalModel("linear", 0, "linear spring N^e = -K_n D_n (ratcheting Eq. 6)", "linear"),
     NormalModel("area", 1, "force proportional to the overlap area, N^e = K_n A / (r_i + r_j) (ratcheting Sec. II B)",
                 "overlap area"))}
-"""The one registry of normal elastic laws, by name; the kernels' codes and every list come from it."""
+"""The one registry of normal elastic laws, by name; the kernels' codes and every list come from it. The
+kernels of a law (its force, energy and tangent stiffness) are the module of
+:mod:`granlab.engine.kernels.normal` named after it."""
 NORMAL_MODELS = tuple(NORMAL)
 WALL_MODES = ("fixed", "velocity", "force")
 CELL_CONTROLS = ("fixed", "stress", "strain-rate")

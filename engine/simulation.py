@@ -25,6 +25,7 @@ from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, K
                              rolling_distance)
 from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, ZETA, ZETA_R
+from .kernels.normal import largest_stiffness
 from .params import (CELL_CONTROLS, NORMAL, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall,
                      finite, positive, whole)
 from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, STATUS_SLIDE_NEG,
@@ -56,12 +57,15 @@ def law_vector(law: ContactLaw) -> np.ndarray:
     return vector
 
 
-def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inertia: np.ndarray) -> float:
+def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inertia: np.ndarray,
+                    max_overlap: float = 0.5) -> float:
     """Largest stable time step of velocity Verlet for this law and these (dynamic) disks.
 
     A Gershgorin estimate of the highest contact frequency with at most ``Z_MAX = 6``
-    contacts per disk: ``omega_max² = 2 Z_MAX max(K_n / m, K_t (1/m + r²/I), K_r / I, F0 / (D0 m))``
-    (a tangential spring moves and turns a disk: ``1/m + r²/I = 3/m`` for a disc).
+    contacts per disk: ``omega_max² = 2 Z_MAX max(k_n / m, K_t (1/m + r²/I), K_r / I, F0 / (D0 m))``
+    (a tangential spring moves and turns a disk: ``1/m + r²/I = 3/m`` for a disc), where ``k_n`` is
+    ``K_n`` or the normal law's tangent stiffness where it is larger at overlaps up to ``max_overlap``
+    of a radius (:func:`largest_stiffness`).
     With damping ratio ``zeta`` (normal, or tangential ``Gamma_t / (2 sqrt(K_t m_t))`` with
     ``m_t = 1 / (2 max(1/m + r²/I))``) the bound of an explicit damped oscillator is
     ``2 (sqrt(1 + zeta²) - zeta) / omega_max``. A viscous rolling moment adds the same bound
@@ -70,7 +74,7 @@ def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inert
     inv_m = float(np.max(1.0 / mass))
     inv_i = float(np.max(1.0 / inertia))
     inv_t = float(np.max(1.0 / mass + radius ** 2 / inertia))
-    rates = [law.normal_stiffness * inv_m, law.tangential_stiffness * inv_t, law.rolling_stiffness * inv_i]
+    rates = [largest_stiffness(law.normal_model, law.normal_stiffness, radius, max_overlap) * inv_m, law.tangential_stiffness * inv_t, law.rolling_stiffness * inv_i]
     if law.cohesion_range > 0:
         rates.append(law.cohesion_force / law.cohesion_range * inv_m)
     omega_max = math.sqrt(2.0 * Z_MAX * max(rates))
@@ -365,7 +369,7 @@ class Simulation:
         p = self.particles
         dynamic = p.inv_mass > 0
         moving = dynamic if dynamic.any() else np.ones_like(dynamic)
-        return stability_bound(law, p.mass[moving], p.radius[moving], p.inertia[moving])
+        return stability_bound(law, p.mass[moving], p.radius[moving], p.inertia[moving], self.integration.max_overlap)
 
     def auto_dt(self, law: ContactLaw | None = None) -> float:
         """The automatic time step for ``law`` (default: the current one): ``dt_safety`` times

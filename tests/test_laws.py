@@ -5,7 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from granlab.engine.kernels import laws
+from granlab.engine.kernels import laws, normal
+from granlab.engine.kernels.normal import area
+from granlab.engine.params import NORMAL
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 
 
@@ -20,37 +22,43 @@ def lens_area_reference(ri, rj, d):
 @pytest.mark.parametrize("ri,rj,overlap", [(1.0, 1.0, 0.3), (0.5, 0.8, 0.1), (0.7, 0.35, 0.05), (1.0, 1.0, 1e-3)])
 def test_overlap_area_matches_textbook_lens(ri, rj, overlap):
     d = ri + rj - overlap
-    assert laws.overlap_area(overlap, ri, rj, False) == pytest.approx(lens_area_reference(ri, rj, d), rel=1e-12)
+    assert area.overlap_area(overlap, ri, rj, False) == pytest.approx(lens_area_reference(ri, rj, d), rel=1e-12)
 
 
 def test_overlap_area_keeps_precision_for_tiny_overlaps():
     # for small overlap delta of equal disks, A = (4/3) sqrt(r) delta^(3/2) (1 + O(delta/r))
     r, delta = 1.0, 1e-9
     expected = 4.0 / 3.0 * math.sqrt(r) * delta ** 1.5
-    assert laws.overlap_area(delta, r, r, False) == pytest.approx(expected, rel=1e-6)
+    assert area.overlap_area(delta, r, r, False) == pytest.approx(expected, rel=1e-6)
 
 
 def test_wall_segment_area_is_half_of_symmetric_lens():
     r, delta = 0.8, 0.2
     # a lens of two equal disks is two equal segments of height delta / 2
-    assert 2 * laws.overlap_area(delta / 2, r, 0.0, True) == pytest.approx(laws.overlap_area(delta, r, r, False))
+    assert 2 * area.overlap_area(delta / 2, r, 0.0, True) == pytest.approx(area.overlap_area(delta, r, r, False))
 
 
-@pytest.mark.parametrize("model", [laws.NORMAL_LINEAR, laws.NORMAL_AREA])
+@pytest.mark.parametrize("name", NORMAL)
 @pytest.mark.parametrize("is_wall", [False, True])
-def test_normal_potential_is_integral_of_force(model, is_wall):
+def test_each_normal_law_stores_the_integral_of_its_force_and_its_stiffness_is_its_derivative(name, is_wall):
+    model = NORMAL[name].code
     kn, ri, rj, overlap = 1e4, 0.6, 0.4, 0.03
     h = 1e-6
-    derivative = (laws.normal_potential(model, kn, overlap + h, ri, rj, is_wall)
-                  - laws.normal_potential(model, kn, overlap - h, ri, rj, is_wall)) / (2 * h)
-    assert derivative == pytest.approx(laws.normal_elastic(model, kn, overlap, ri, rj, is_wall), rel=1e-7)
+    derivative = (normal.energy(model, kn, overlap + h, ri, rj, is_wall)
+                  - normal.energy(model, kn, overlap - h, ri, rj, is_wall)) / (2 * h)
+    assert derivative == pytest.approx(normal.force(model, kn, overlap, ri, rj, is_wall), rel=1e-7)
+    slope = (normal.force(model, kn, overlap + h, ri, rj, is_wall)
+             - normal.force(model, kn, overlap - h, ri, rj, is_wall)) / (2 * h)
+    assert slope == pytest.approx(normal.stiffness(model, kn, overlap, ri, rj, is_wall), rel=1e-6)
+    assert normal.force(model, kn, 0.0, ri, rj, is_wall) == normal.energy(model, kn, -0.1, ri, rj, is_wall) == 0.0
 
 
 def test_area_law_stiffness_never_exceeds_kn():
     kn, r = 1e4, 0.5
     overlaps = np.linspace(1e-6, 0.9 * r, 200)
-    forces = np.array([laws.normal_elastic(laws.NORMAL_AREA, kn, d, r, r, False) for d in overlaps])
+    forces = np.array([normal.force(NORMAL["area"].code, kn, d, r, r, False) for d in overlaps])
     assert np.all(np.diff(forces) / np.diff(overlaps) <= kn * (1 + 1e-9))
+    assert normal.largest_stiffness("area", kn, np.array([0.3, r])) == kn
 
 
 @pytest.mark.parametrize("gap", [-0.01, 0.0, 0.002, 0.005, 0.0099])

@@ -101,11 +101,13 @@ def test_the_kernels_dispatch_from_python_to_each_model_s_own_kernel():
 
 
 def test_normal_laws_have_one_registry_the_kernels_and_the_simulation_read():
-    from granlab.engine.kernels import laws
+    from granlab.engine.kernels import normal
     from granlab.engine.params import NORMAL, NORMAL_MODELS
 
     assert NORMAL_MODELS == tuple(NORMAL) == ("linear", "area")
-    assert (laws.NORMAL_LINEAR, laws.NORMAL_AREA) == (NORMAL["linear"].code, NORMAL["area"].code)
+    assert normal.CODES == tuple(sorted(model.code for model in NORMAL.values()))
+    assert {code: law.__name__.rpartition(".")[2] for code, law in normal.MODELS.items()} == \
+        {model.code: model.key for model in NORMAL.values()}
     assert len({model.code for model in NORMAL.values()}) == len(NORMAL)
     for name, model in NORMAL.items():
         sim = periodic_gas(count=20, length=12.0, law=ContactLaw(normal_model=name))

@@ -29,7 +29,7 @@ import panel as pn
 
 from granlab.engine.analysis import ANALYSES
 from granlab.engine.errors import ParameterError
-from granlab.engine.params import TANGENTIAL_MODELS
+from granlab.engine.params import NORMAL_MODELS, TANGENTIAL_MODELS
 from granlab.engine.protocols.presets import FIELD_TYPES, PRESETS, Preset, parse_setup, setup_text
 from granlab.engine.protocols.settings import CONTROL_LABELS
 
@@ -258,6 +258,7 @@ class Dashboard:
         self.no_sliding = W.Checkbox(name="μ = ∞ (no sliding)", value=False, css_classes=["friction-infinite"])
         self.model = W.Select(name="Tangential spring", options=list(TANGENTIAL_MODELS), css_classes=["model-select"],
                               **wide)
+        self.normal = W.Select(name="Normal spring", options=list(NORMAL_MODELS), css_classes=["normal-select"], **wide)
         self.damping = W.FloatSlider(name="Damping ζ", start=0.0, end=0.95, step=0.05, value=0.3,
                                      css_classes=["damping-slider"], **wide)
         self.rolling_friction = W.FloatInput(name="Rolling friction μr", value=0.0, step=0.001,
@@ -311,7 +312,7 @@ class Dashboard:
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
                 (self.rolling_stiffness, "rolling_stiffness"), (self.cohesion_force, "cohesion_force"),
-                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"),
+                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"), (self.normal, "normal_model"),
                 (self.frames_kept, "frames_per_cycle")]
         for widget, key in live:
             widget.param.watch(lambda e, key=key: self._control(key, e.new), "value")
@@ -820,7 +821,8 @@ class Dashboard:
                             *labelled(self.period, "period"), self.cancel_pending, self._note_pane("pending"),
                             self.fit_now, self._note_pane("fit"), sizing_mode="stretch_width")
         contacts = pn.Column(pn.pane.HTML("<b>Contacts</b>"), self.friction, *labelled(self.no_sliding, "friction"),
-                             *labelled(self.model, "tangential_model"), *labelled(self.damping, "damping_ratio"),
+                             *labelled(self.model, "tangential_model"), *labelled(self.normal, "normal_model"),
+                             *labelled(self.damping, "damping_ratio"),
                              *labelled(self.rolling_friction, "rolling_friction"),
                              *labelled(self.rolling_stiffness, "rolling_stiffness"),
                              *labelled(self.cohesion_force, "cohesion_force"),
@@ -828,7 +830,7 @@ class Dashboard:
         sample = pn.Column(pn.pane.HTML("<b>Sample</b>"), *labelled(self.particles, "particles"),
                            *labelled(self.seed, "seed"), self.apply_reset, sizing_mode="stretch_width")
         self.groups = {loading: {"phase", "amplitude", "pressure", "period"},
-                       contacts: {"friction", "tangential_model", "damping_ratio", "rolling_friction",
+                       contacts: {"friction", "tangential_model", "normal_model", "damping_ratio", "rolling_friction",
                                   "rolling_stiffness", "cohesion_force", "cohesion_range"},
                        sample: {"particles", "seed"}}
         self.no_controls = pn.pane.HTML("<i>This preset has no live controls: only its speed.</i>",

@@ -47,6 +47,7 @@ import scipy.sparse.linalg as spla
 
 from .. import params
 from ..errors import GranLabError, ParameterError
+from ..kernels import normal as normal_laws
 from ..observables import interacting, sliding
 from ..state import STATUS_COHESIVE
 from . import LOADS
@@ -144,14 +145,15 @@ class Network:
 
 
 def tangent_normal_stiffness(law, overlap, ri, rj, is_wall) -> np.ndarray:
-    """dN^e / d overlap: k_n (linear law) or k_n chord / l (area law: dA/d overlap is the chord)."""
-    if law.normal_model == "linear":
-        return np.full(overlap.shape, law.normal_stiffness)
-    distance = np.where(is_wall, ri - overlap, ri + rj - overlap)  # wall: centre to wall line
-    along = np.where(is_wall, distance, (distance ** 2 + ri ** 2 - rj ** 2) / (2.0 * np.maximum(distance, 1e-300)))
-    chord = 2.0 * np.sqrt(np.maximum(ri ** 2 - along ** 2, 0.0))
-    length = np.where(is_wall, 2.0 * ri, ri + rj)
-    return law.normal_stiffness * chord / length
+    """dN^e / d overlap of each contact: its normal law's tangent stiffness (``K_n`` for the linear
+    law, ``K_n chord / l`` for the area law: dA/d overlap is the chord)."""
+    return normal_laws.stiffnesses(params.NORMAL[law.normal_model].code, float(law.normal_stiffness),
+                                   *rows(overlap, ri, rj, is_wall))
+
+
+def rows(overlap, ri, rj, is_wall) -> tuple[np.ndarray, ...]:
+    """Columns of contacts as the normal laws' row kernels take them (float, float, float, bool)."""
+    return (*(np.ascontiguousarray(a, dtype=float) for a in (overlap, ri, rj)), np.ascontiguousarray(is_wall, dtype=bool))
 
 
 def network(snapshot, cell_lengths=None) -> Network:

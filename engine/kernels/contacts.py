@@ -39,8 +39,9 @@ from .gathered import (BLOCK, C_FN, C_FT, C_FX, C_FY, C_GAP, C_HOT, C_NORMAL_DAM
                        C_TORQUE_I, C_TORQUE_J, compute_block, gather_block)
 from .cache import for_model
 from .jit import KERNEL, PARALLEL, njit
-from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, NORMAL_LINEAR, ZETA, ZETA_R, cohesion_force,
+from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force,
                    opened_dashpot_share, touching)
+from .normal import GATHERED
 from .pair import touching_laws
 from .tangential import RowGeometry, model_key
 
@@ -223,7 +224,7 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     overlapping = 0
     max_overlap = 0.0
     columns = ws.row_columns
-    gathered = run.gathered and normal_model == NORMAL_LINEAR
+    gathered = run.gathered and normal_model == GATHERED
     for k in range(lo, hi):
         q = (k - lo) % BLOCK
         if gathered and q == 0:

@@ -4,8 +4,8 @@ import math
 
 from ..state import STATUS_NONE, WALL_FORCE
 from .jit import JIT, njit
-from .laws import (D0, F0, KN, KR, KT, cohesion_potential, disk_arc, normal_elastic, normal_potential,
-                   wall_arc)
+from . import normal
+from .laws import D0, F0, KN, KR, KT, cohesion_potential, disk_arc, wall_arc
 
 (KINETIC_TRANSLATION, KINETIC_ROTATION, NORMAL_ELASTIC, COHESION, TANGENTIAL_ELASTIC, ROLLING_ELASTIC,
  GRAVITY, WALL_KINETIC) = range(8)
@@ -16,8 +16,8 @@ ENERGY_SIZE = 8
 def energy_terms(p, w, ct, law, normal_model, gravity, out):
     """Kinetic, stored and gravitational energies of the current state.
 
-    Stored energy per contact: the normal spring (``K_n D_n²/2`` for the linear law,
-    ratcheting Eq. 12), the cohesion potential, ``K_t D_t²/2`` and ``K_r dtheta²/2``.
+    Stored energy per contact: the normal spring's (its law's energy; ``K_n D_n²/2`` for the linear
+    law, ratcheting Eq. 12), the cohesion potential, ``K_t D_t²/2`` and ``K_r dtheta²/2``.
     Gravity: ``-sum m g · x`` over dynamic disks. Walls: kinetic energy of
     force-controlled walls. Fixed and kinematic disks carry no kinetic energy here
     (their motion is prescribed; its work is tallied separately).
@@ -40,7 +40,7 @@ def energy_terms(p, w, ct, law, normal_model, gravity, out):
         is_wall = j >= n
         rj = 0.0 if is_wall else p.radius[j]
         gap = ct.surface_gap[k]
-        out[NORMAL_ELASTIC] += normal_potential(normal_model, law[KN], -gap, p.radius[i], rj, is_wall)
+        out[NORMAL_ELASTIC] += normal.energy(normal_model, law[KN], -gap, p.radius[i], rj, is_wall)
         out[COHESION] += cohesion_potential(law[F0], law[D0], gap)
         out[TANGENTIAL_ELASTIC] += 0.5 * law[KT] * ct.tangential_spring[k] ** 2
         out[ROLLING_ELASTIC] += 0.5 * law[KR] * ct.rolling_spring[k] ** 2
@@ -90,4 +90,4 @@ def elastic_normal_forces(p, ct, law, normal_model, out):
         j = ct.particle_j[k]
         is_wall = j >= n
         rj = 0.0 if is_wall else p.radius[j]
-        out[k] = normal_elastic(normal_model, law[KN], -ct.surface_gap[k], p.radius[i], rj, is_wall)
+        out[k] = normal.force(normal_model, law[KN], -ct.surface_gap[k], p.radius[i], rj, is_wall)

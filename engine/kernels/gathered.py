@@ -23,7 +23,8 @@ from numba import uint64
 
 from . import tangential
 from .jit import KERNEL, njit
-from .laws import NORMAL_LINEAR, touching
+from .laws import touching
+from .normal import GATHERED
 from .pair import touching_laws
 from .tangential import RowGeometry
 
@@ -135,7 +136,7 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
                           columns[c, C_ANGLE_J * BLOCK + q], columns[c, C_ANCHOR_I * BLOCK + q],
                           columns[c, C_ANCHOR_J * BLOCK + q], False, 0.0, 0.0, 0.0, columns[c, C_PHI * BLOCK + q])
         (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, sliding, rolling_work,
-         rolling_slip) = touching_laws(NORMAL_LINEAR, tangential_model, laws, dt, whole_step, overlap, ri, rj, False,
+         rolling_slip) = touching_laws(GATHERED, tangential_model, laws, dt, whole_step, overlap, ri, rj, False,
                                        eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, False,
                                        columns[c, C_PREVIOUS * BLOCK + q], row, True,
                                        columns[c, C_INV_INERTIA * BLOCK + q], columns[c, C_PREVIOUS_ROLL * BLOCK + q],

@@ -1,4 +1,5 @@
-"""Contact laws: small scalar functions called by the one generic contact loop.
+"""Contact laws: small scalar functions called by the one generic contact loop (the normal elastic
+laws are a family of their own, :mod:`granlab.engine.kernels.normal`).
 
 Conventions (ratcheting paper, Fig. 7): ``n`` points from j to i, ``t = z × n``,
 ``F_n > 0`` repels, ``D_n < 0`` is an overlap (Gilabert's ``h = D_n``). The
@@ -11,7 +12,6 @@ The runtime parameters travel in one float64 vector indexed by ``KN, KT, ...``
 
 import math
 
-from ..params import NORMAL
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK
 from .jit import KERNEL, njit
 
@@ -19,15 +19,7 @@ from .jit import KERNEL, njit
 KN, KT, MU, ZETA, GAMMA_T, F0, D0, KR, MU_R, ZETA_R = range(10)
 LAW_SIZE = 10
 
-NORMAL_LINEAR, NORMAL_AREA = NORMAL["linear"].code, NORMAL["area"].code
-
 TWO_PI = 2.0 * math.pi
-
-# 8-point Gauss-Legendre nodes and weights on [0, 1]
-_GL_NODES = (0.019855071751231856, 0.10166676129318664, 0.2372337950418355, 0.4082826787521751,
-             0.5917173212478249, 0.7627662049581645, 0.8983332387068134, 0.9801449282487681)
-_GL_WEIGHTS = (0.05061426814518813, 0.11119051722668724, 0.15685332293894363, 0.18134189168918100,
-               0.18134189168918100, 0.15685332293894363, 0.11119051722668724, 0.05061426814518813)
 
 
 @njit(**KERNEL)
@@ -55,75 +47,6 @@ def wall_arc(tx, ty, x, y, wall_shift, anchor):
     """Distance along a wall (tangent ``(tx, ty)``, slid by ``wall_shift``) from the point of first
     contact ``anchor`` to the foot of a disk at ``(x, y)``: a wall's :func:`disk_arc`."""
     return tx * x + ty * y - wall_shift - anchor
-
-
-@njit(**KERNEL)
-def _x_minus_sin_x(x):
-    if abs(x) < 0.2:
-        x2 = x * x
-        return x * x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0)))
-    return x - math.sin(x)
-
-
-@njit(**KERNEL)
-def segment_area(r, h):
-    """Area of the circular segment of height ``h`` (0 <= h <= 2r) of a disk of radius ``r``.
-
-    Written with the half-angle ``beta`` (area ``r²/2 (2 beta - sin 2 beta)``) so that it
-    keeps full relative precision for the tiny overlaps of stiff grains.
-    """
-    if h <= 0.0:
-        return 0.0
-    if h >= 2.0 * r:
-        return math.pi * r * r
-    beta = math.atan2(math.sqrt(h * (2.0 * r - h)), r - h)
-    return 0.5 * r * r * _x_minus_sin_x(2.0 * beta)
-
-
-@njit(**KERNEL)
-def overlap_area(overlap, ri, rj, is_wall):
-    """Overlap area of disk i with disk j (or with a wall) for an overlap ``-D_n``."""
-    if overlap <= 0.0:
-        return 0.0
-    if is_wall:
-        return segment_area(ri, overlap)
-    dist = ri + rj - overlap
-    if dist <= abs(ri - rj):
-        r = min(ri, rj)
-        return math.pi * r * r
-    hi = overlap * (rj - ri + dist) / (2.0 * dist)
-    hj = overlap * (ri - rj + dist) / (2.0 * dist)
-    return segment_area(ri, hi) + segment_area(rj, hj)
-
-
-@njit(**KERNEL)
-def normal_elastic(normal_model, kn, overlap, ri, rj, is_wall):
-    """Elastic repulsion ``N^e >= 0`` for an overlap ``-D_n`` (zero when apart).
-
-    Linear: ``K_n (-D_n)`` (ratcheting Eq. 6). Area: ``K_n A / l`` with ``l = r_i + r_j``
-    (``2 r_i`` for a wall), whose tangent stiffness ``K_n chord / l`` never exceeds K_n.
-    """
-    if overlap <= 0.0:
-        return 0.0
-    if normal_model == NORMAL_LINEAR:
-        return kn * overlap
-    length = 2.0 * ri if is_wall else ri + rj
-    return kn * overlap_area(overlap, ri, rj, is_wall) / length
-
-
-@njit(**KERNEL)
-def normal_potential(normal_model, kn, overlap, ri, rj, is_wall):
-    """Energy stored by the normal spring: the integral of ``N^e`` over the overlap."""
-    if overlap <= 0.0:
-        return 0.0
-    if normal_model == NORMAL_LINEAR:
-        return 0.5 * kn * overlap * overlap
-    # substitution s = overlap u² makes the integrand smooth: Gauss-Legendre is exact to rounding
-    total = 0.0
-    for k in range(8):
-        u = _GL_NODES[k]
-        total += _GL_WEIGHTS[k] * normal_elastic(normal_model, kn, overlap * u * u, ri, rj, is_wall) * 2.0 * u
-    return total * overlap
 
 
 @njit(**KERNEL)

@@ -8,9 +8,9 @@ would not inline it (too large), and the gathered loop would neither vectorise n
 (18 -> 44 ns a row); the direct loop took 38 ns a row instead of 24.
 """
 
-from . import tangential
+from . import normal, tangential
 from .jit import KERNEL, njit
-from .laws import cohesion_force, dashpot_share, normal_elastic, rolling_step
+from .laws import cohesion_force, dashpot_share, rolling_step
 
 
 @njit(**KERNEL, inline="always")
@@ -28,7 +28,7 @@ def touching_laws(normal_model, tangential_model, laws, dt, whole_step, overlap,
     dashpot's work, tangential viscous work, energy the slip lets go, rolling dashpot's work, energy
     the rolling slip lets go)``."""
     kt = laws.kt
-    ne = normal_elastic(normal_model, laws.kn, overlap, ri, rj, is_wall)
+    ne = normal.force(normal_model, laws.kn, overlap, ri, rj, is_wall)
     share = dashpot_share(overlap, vn_d, dt, fresh) if whole_step else 1.0
     fn = ne - share * eta * vn_d + cohesion_force(laws.f0, laws.d0, -overlap)
     rate = tangential.spring_rate(tangential_model, vt, spin_sum, alpha)

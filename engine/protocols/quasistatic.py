@@ -23,7 +23,7 @@ collapse: the block of Fig. 2 pushed past ``mu F_n``); no consistent status; or 
 contact network after which no equilibrium is found.
 
 Supported: disks and walls (fixed, or force-controlled and then bodies of k), any tangential
-model, the linear and area normal laws, gravity and constant forces on disks. Not supported (a
+model, every normal law (each gives its tangent stiffness), gravity and constant forces on disks. Not supported (a
 :class:`granlab.engine.errors.ParameterError` says so): periodic axes, cohesion and rolling
 resistance (their thresholds have no consistent status here). Disks with infinite mass or
 inertia, and kinematic disks, keep those degrees of freedom fixed.
@@ -44,8 +44,8 @@ from scipy.spatial import cKDTree
 from ..analysis import stiffness
 from ..analysis.status import MAX_ENUMERATED_SPARSE, critical_contacts, enumerate_states, solve_status
 from ..errors import DivergenceError, GranLabError, ParameterError
-from ..kernels.laws import normal_elastic
-from ..params import TANGENTIAL, Load
+from ..kernels import normal as normal_laws
+from ..params import NORMAL, TANGENTIAL, Load
 from ..simulation import Simulation
 from ..state import KIND_FIXED, KIND_KINEMATIC, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, WALL_FORCE
 
@@ -248,11 +248,10 @@ class _Packing:
         return normal, overlap, np.where(is_wall, height, distance), is_wall
 
     def elastic_normal(self, overlap, i, j, is_wall) -> np.ndarray:
-        code = 0 if self.law.normal_model == "linear" else 1
         ri = self.radii[i]
         rj = np.where(is_wall, 0.0, self.radii[np.where(is_wall, 0, j)])
-        return np.array([normal_elastic(code, self.law.normal_stiffness, max(o, 0.0), a, b, w)
-                         for o, a, b, w in zip(overlap, ri, rj, is_wall)]) if len(overlap) else np.zeros(0)
+        return normal_laws.forces(NORMAL[self.law.normal_model].code, float(self.law.normal_stiffness),
+                                  *stiffness.rows(overlap, ri, rj, is_wall))
 
     def network(self, x, offsets, i, j, ne, ft, status, lam) -> stiffness.Network:
         normal, overlap, distance, is_wall = self.geometry(x, offsets, i, j)

@@ -14,7 +14,7 @@ CONTROL_LABELS = {
     "particles": "Disks N", "seed": "Seed", "pressure": "Pressure P0", "amplitude": "Amplitude Δσ",
     "period": "Period T", "phase": "Loading phase φ", "friction": "Friction μ", "rolling_friction": "Rolling friction μr",
     "rolling_stiffness": "Rolling stiffness Kr", "cohesion_force": "Cohesion F0", "cohesion_range": "Cohesion range D0",
-    "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
+    "normal_model": "Normal spring", "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
     "frames_per_cycle": "Frames kept",
 }
 """The name each control has on the lab's page."""
@@ -39,6 +39,7 @@ class LabSettings:
     rolling_stiffness: float = 0.0
     cohesion_force: float = 0.0
     cohesion_range: float = 0.0
+    normal_model: str = "linear"
     tangential_model: str = "cundall-strack"
     damping_ratio: float = 0.3
     speed: float = 1.0
@@ -60,7 +61,8 @@ class LabSettings:
                                  "from more than 0 to 100 frames kept per clock unit (a load cycle, a loop, T_0)")
         law = ContactLaw(friction=self.friction, rolling_friction=self.rolling_friction,
                          rolling_stiffness=self.rolling_stiffness, cohesion_force=self.cohesion_force,
-                         cohesion_range=self.cohesion_range, tangential_model=self.tangential_model,
+                         cohesion_range=self.cohesion_range, normal_model=self.normal_model,
+                         tangential_model=self.tangential_model,
                          damping_ratio=self.damping_ratio)
         if MAX_FRICTION < law.friction < math.inf:  # the law took any μ >= 0; the lab's packings stop sliding here
             raise ParameterError("friction", self.friction, f"a friction coefficient from 0 to {MAX_FRICTION:g}, or inf "
@@ -79,5 +81,5 @@ MAX_FRICTION = 10.0
 """Beyond it no contact of the lab's packings slides: μ = ∞ says so."""
 
 LAW_CONTROLS = ("friction", "rolling_friction", "rolling_stiffness", "cohesion_force", "cohesion_range",
-                "tangential_model", "damping_ratio")
+                "normal_model", "tangential_model", "damping_ratio")
 RESET_CONTROLS = ("particles", "seed")

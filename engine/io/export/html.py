@@ -23,7 +23,7 @@ from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.frames import cell_outline, group_labels, meeting_walls
 from granlab.engine.io import h5md
 from granlab.engine.observables import coordination, solid_fraction
-from granlab.engine.params import TANGENTIAL
+from granlab.engine.params import NORMAL, TANGENTIAL
 from granlab.engine.protocols.presets import PRESETS
 from granlab.engine.protocols.measures import pair_codes
 from granlab.engine.protocols.presets.base import CONTROL_SYMBOLS
@@ -205,13 +205,15 @@ def force_classes(force: np.ndarray) -> np.ndarray:
 
 def _value_text(value) -> str:
     if isinstance(value, str):
-        return "∞" if value == "inf" else TANGENTIAL[value].label if value in TANGENTIAL else value
+        named = {**NORMAL, **TANGENTIAL}
+        return "∞" if value == "inf" else named[value].label if value in named else value
     if isinstance(value, float):
         return "∞" if value == math.inf else f"{value:.4g}"
     return str(value)
 
 
-SETTING_WORDS = {"friction": "friction", "tangential_model": "tangential spring", "damping_ratio": "damping",
+SETTING_WORDS = {"friction": "friction", "tangential_model": "tangential spring", "normal_model": "normal spring",
+                 "damping_ratio": "damping",
                  "pressure": "pressure", "amplitude": "amplitude", "period": "period", "phase": "phase",
                  "rolling_friction": "rolling friction", "rolling_stiffness": "rolling stiffness",
                  "cohesion_force": "cohesion", "cohesion_range": "range", "particles": "disks N", "seed": "seed"}

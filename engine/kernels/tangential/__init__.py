@@ -17,7 +17,8 @@ or the half-step ones is the registry's ``whole_step_dashpots``.
 The functions below dispatch on a model code known when the contact loop is compiled (a literal):
 each model gets its own loop, with its laws inlined, and nothing is decided per row. Called from
 Python (a test, a notebook), they run the model's own kernel. Adding a model
-is its module here and its line in the registry.
+is its module here and its line in the registry; a module without one of the four kernels does not
+register (:class:`granlab.engine.errors.RegistryError` names it).
 """
 
 import importlib
@@ -26,6 +27,7 @@ from collections import namedtuple
 from numba import types
 from numba.extending import overload
 
+from ...errors import RegistryError
 from ...params import TANGENTIAL
 
 RowGeometry = namedtuple("RowGeometry", "nx ny rx ry dvx dvy ri rj angle_i angle_j anchor_i anchor_j is_wall xi yi "
@@ -41,6 +43,18 @@ _WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGE
 _READS_DIRECTION = {model.code: model.reads_direction for model in TANGENTIAL.values()}
 CODES = tuple(sorted(MODELS))
 """The models' codes: the contact loop is compiled for each, when a run first uses it."""
+PARTS = ("spring_rate", "trial_spring", "limit", "centre_factor")
+
+
+def _check_parts():
+    for model in TANGENTIAL.values():
+        missing = [part for part in PARTS if not callable(getattr(MODELS[model.code], part, None))]
+        if missing:
+            raise RegistryError("tangential model", model.name, MODELS[model.code].__file__, missing,
+                                ", ".join(PARTS))
+
+
+_check_parts()
 
 
 def model_key(code: int) -> str:

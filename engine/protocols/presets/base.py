@@ -32,7 +32,7 @@ MAX_SLOWDOWN = 10.0
 """A law change may shorten the preset's time step this much at most."""
 CONTROL_SYMBOLS = {"pressure": "P0", "amplitude": "Δσ", "period": "T", "phase": "φ", "friction": "μ",
                    "rolling_friction": "μr", "rolling_stiffness": "Kr", "cohesion_force": "F0", "cohesion_range": "D0",
-                   "tangential_model": "spring", "damping_ratio": "ζ"}
+                   "normal_model": "normal spring", "tangential_model": "spring", "damping_ratio": "ζ"}
 """The settings of the physics, as the plots' change markers name them (speed and the frames kept
 change nothing the plots show)."""
 MAX_CHANGES = 200

@@ -58,7 +58,7 @@ class RatchetPreset(Preset):
         s = self.settings
         # compressed as by prepare.compress, a step at a time: walls of one row, the load ramped
         self._sim = biaxial_box(s.particles, seed=s.seed, pressure=s.pressure, damping_ratio=s.damping_ratio,
-                                tangential_model=s.tangential_model)
+                                normal_model=s.normal_model, tangential_model=s.tangential_model)
         ramp_load(self._sim, s.pressure, COMPRESSION_RAMP)
         self.stage = "compressing"
         self._ramping = True
