@@ -88,7 +88,7 @@ def test_the_kernels_dispatch_from_python_to_each_model_s_own_kernel():
     from granlab.engine.kernels import tangential
 
     row = tangential.RowGeometry(1.0, 0.0, 1.9, 0.0, 0.0, 0.3, 1.0, 0.9, 0.1, 0.2, 0.05, 0.1, False, 0.0, 0.0, 0.0,
-                                 0.0)
+                                 0.0, 1.0)
     for model in TANGENTIAL.values():
         own = tangential.MODELS[model.code]
         assert tangential.spring_rate(model.code, 0.3, 0.1, 1.02) == own.spring_rate(0.3, 0.1, 1.02) is not None

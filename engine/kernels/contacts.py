@@ -42,7 +42,7 @@ from .jit import KERNEL, PARALLEL, njit
 from .laws import (D0, F0, GAMMA_T, KN, KR, KT, MU, MU_R, ZETA, ZETA_R, cohesion_force,
                    opened_dashpot_share, touching)
 from .normal import GATHERED
-from .pair import touching_laws
+from .pair import History, Rates, touching_laws
 from .tangential import RowGeometry, model_key
 
 # per-chunk scalar tallies
@@ -51,7 +51,7 @@ TALLY_VXX, TALLY_VXY, TALLY_VYX, TALLY_VYY = 4, 5, 6, 7
 TALLY_OVERLAPPING, TALLY_MAX_OVERLAP, TALLY_OPENING = 8, 9, 10
 TALLY_SIZE = 11
 
-Laws = namedtuple("Laws", "kn kt mu gamma_t f0 d0 kr mu_r gamma_r_factor eta_factor")
+Laws = namedtuple("Laws", "kn kt mu gamma_t f0 d0 kr mu_r gamma_r_factor eta_factor overlap_limit")
 """The contact law's scalars as the loop reads them (:func:`chunk_laws`); the dashpots' factors
 are multiplied by the root of a row's reduced mass (normal) or inertia (rolling)."""
 
@@ -99,10 +99,11 @@ def image_virial(fx, fy, sx, sy, vxx, vxy, vyx, vyy):
 
 
 @njit(**KERNEL)
-def chunk_laws(law):
-    """The :data:`Laws` of the law array ``law`` (its slots: :mod:`granlab.engine.kernels.laws`)."""
+def chunk_laws(law, overlap_limit):
+    """The :data:`Laws` of the law array ``law`` (its slots: :mod:`granlab.engine.kernels.laws`) and
+    the run's overlap limit."""
     return Laws(law[KN], law[KT], law[MU], law[GAMMA_T], law[F0], law[D0], law[KR], law[MU_R],
-                2.0 * law[ZETA_R] * math.sqrt(law[KR]), 2.0 * law[ZETA] * math.sqrt(law[KN]))
+                2.0 * law[ZETA_R] * math.sqrt(law[KR]), 2.0 * law[ZETA] * math.sqrt(law[KN]), overlap_limit)
 
 
 @njit(**KERNEL)
@@ -120,11 +121,12 @@ def anchor(ct, k, angle, i, j, nx, ny, is_wall, xi, yi, wall_shift):
 
 
 @njit(**KERNEL)
-def separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening):
-    """The laws of a row whose disks do not overlap: what its normal dashpot did in this step's
+def separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, tallies, opening):
+    """Stage two for a row whose disks do not overlap: what its normal dashpot did in this step's
     window before it opened, its history forgotten, the cohesive pull within ``D0``. Returns
-    ``F_n`` and the tallies ``damping`` and ``opening`` with this row's shares added; the row
-    acts when ``F_n != 0`` or it is cohesive."""
+    ``F_n``, whether the row acts (``F_n != 0`` or it is cohesive) and the tallies (as
+    :func:`touching_row`'s) and ``opening`` with this row's shares added."""
+    damping, sliding, rolling_loss, overlapping, max_overlap = tallies
     fn = 0.0
     if whole_step and touching(ct.status[k]):
         share = opened_dashpot_share(gap, vn_d, dt)
@@ -135,7 +137,17 @@ def separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening)
     if laws.f0 > 0.0 and gap < laws.d0:
         fn += cohesion_force(laws.f0, laws.d0, gap)
         ct.status[k] = STATUS_COHESIVE
-    return fn, damping, opening
+    acts = fn != 0.0 or ct.status[k] == STATUS_COHESIVE
+    return fn, acts, (damping, sliding, rolling_loss, overlapping, max_overlap), opening
+
+
+@njit(**KERNEL)
+def store_row(ct, k, fn, ft, gap, store):
+    """The results of row ``k`` kept when ``store`` (the last step of a run)."""
+    if store:
+        ct.normal_force[k] = fn
+        ct.tangential_force[k] = ft
+        ct.surface_gap[k] = gap
 
 
 @njit(**KERNEL)
@@ -185,239 +197,290 @@ def contact_chunks_parallel(p, w, cell, ct, ws, law, run, tangential_model, stor
         contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, np.int64(c))
 
 
-@njit(**KERNEL)
-def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
-    """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``, with the laws
-    of tangential model ``tangential_model`` (a compile-time code)."""
-    literally(tangential_model)
-    normal_model, dt, overlap_limit, n_chunks = run.normal_model, run.dt, run.max_overlap, run.n_chunks
-    force_buffer, wall_buffer, tally_buffer = ws.force_buffer, ws.wall_buffer, ws.tally_buffer
-    position = p.position
-    velocity = p.velocity
-    angle = p.angle
-    omega = p.omega
-    radius = p.radius
-    length_x = cell.length[0]
-    length_y = cell.length[1]
-    strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
-    strain_y = cell.rate[1] / length_y if length_y > 0.0 else 0.0
-    cell_strain = (strain_x, strain_y)
-    particle_i = ct.particle_i
-    particle_j = ct.particle_j
-    image = ct.image
-    status = ct.status
-    surface_gap = ct.surface_gap
-    count = ct.count[0]
-    n = uint64(position.shape[0])
-    laws = chunk_laws(law)
-    d0 = laws.d0
-    # without a dashpot the dashpots' velocities multiply zero: the half-step ones serve, unread
-    whole_step = tangential.whole_step_dashpots(tangential_model) and (
-        laws.eta_factor > 0.0 or laws.gamma_t > 0.0 or laws.gamma_r_factor > 0.0)
+Geometry = namedtuple("Geometry", "rj nx ny rx ry dvx dvy spin_sum relative_spin alpha gap angle_j wall_shift "
+                                   "wall_vx wall_vy")
+"""A row's geometry (:func:`pair_geometry`, :func:`wall_geometry`): the other radius (0 for a wall),
+normal, branch vector (for a wall, from the wall to the centre), relative velocity of the centres and
+spins, ``alpha = (r_i + r_j)/|r|``, the gap ``D_n``, the other body's angle, how far the wall has slid
+along itself and its velocity (zero for a disk)."""
 
-    lo = uint64(c * count // n_chunks)
-    hi = uint64((c + 1) * count // n_chunks)
-    for m in range(w.offset.shape[0]):
-        wall_buffer[c, m] = 0.0
-    damping = sliding = rolling_loss = wall_work = opening = 0.0
-    vxx = vxy = vyx = vyy = 0.0  # virial corrections
-    overlapping = 0
-    max_overlap = 0.0
-    columns = ws.row_columns
-    gathered = run.gathered and normal_model == GATHERED
-    for k in range(lo, hi):
-        q = (k - lo) % BLOCK
-        if gathered and q == 0:
-            end = min(hi, k + BLOCK)
-            gather_block(p, cell.length, cell_strain, ct, columns, c, k, end, laws.kr > 0.0,
-                         tangential.reads_direction(tangential_model))
-            compute_block(columns, c, end - k, laws, tangential_model, dt, overlap_limit, whole_step)
-        i = uint64(particle_i[k])
-        j = uint64(particle_j[k])
-        if gathered and columns[c, C_HOT * BLOCK + q] != 0.0:
-            excess = columns[c, C_OVERLAP_EXCESS * BLOCK + q]
-            if excess != 0.0:
-                overlapping += 1
-                max_overlap = max(max_overlap, excess)
-            damping += columns[c, C_NORMAL_DAMPING * BLOCK + q]
-            if tangential.whole_step_dashpots(tangential_model):
-                damping += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
-            else:
-                sliding += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
-            state = int(columns[c, C_STATUS * BLOCK + q])
-            if state != STATUS_STICK:
-                slip = columns[c, C_SLIP * BLOCK + q]
-                sliding += columns[c, C_SLIDING * BLOCK + q]
-                ct.anchor_angle_i[k] += 0.5 * slip / radius[i]
-                ct.anchor_angle_j[k] += 0.5 * slip / radius[j]
-            ct.tangential_spring[k] = columns[c, C_SPRING * BLOCK + q]
-            status[k] = state
-            if laws.kr > 0.0:
-                damping += columns[c, C_ROLLING_WORK * BLOCK + q]
-                rolling_loss += columns[c, C_ROLLING_SLIP * BLOCK + q]
-                ct.rolling_spring[k] = columns[c, C_ROLL * BLOCK + q]
-            fx = columns[c, C_FX * BLOCK + q]
-            fy = columns[c, C_FY * BLOCK + q]
-            if store:
-                ct.normal_force[k] = columns[c, C_FN * BLOCK + q]
-                ct.tangential_force[k] = columns[c, C_FT * BLOCK + q]
-                surface_gap[k] = columns[c, C_GAP * BLOCK + q]
-            force_buffer[c, i, 0] += fx
-            force_buffer[c, i, 1] += fy
-            force_buffer[c, i, 2] += columns[c, C_TORQUE_I * BLOCK + q]
-            force_buffer[c, j, 0] -= fx
-            force_buffer[c, j, 1] -= fy
-            force_buffer[c, j, 2] += columns[c, C_TORQUE_J * BLOCK + q]
-            if image[k, 0] != 0 or image[k, 1] != 0:
-                vxx, vxy, vyx, vyy = image_virial(fx, fy, image[k, 0] * length_x, image[k, 1] * length_y, vxx, vxy,
-                                                  vyx, vyy)
-            continue
-        ri = radius[i]
-        is_wall = j >= n
-        wall_vx = 0.0
-        wall_vy = 0.0
-        if not is_wall:
-            rj = radius[j]
-            rx = position[i, 0] - position[j, 0] - image[k, 0] * length_x
-            ry = position[i, 1] - position[j, 1] - image[k, 1] * length_y
-            r2 = rx * rx + ry * ry
-            reach = ri + rj + d0
-            if r2 >= reach * reach and not touching(status[k]):
-                if status[k] != STATUS_NONE:
-                    opening += forget(k, status, ct.tangential_spring, ct.rolling_spring, ct.normal_force,
-                                      ct.tangential_force, laws.kt, laws.kr)
-                if store:
-                    surface_gap[k] = math.sqrt(r2) - ri - rj
-                continue
-            dist = math.sqrt(r2)
-            inv_dist = 1.0 / dist
-            nx = rx * inv_dist
-            ny = ry * inv_dist
-            dvx = velocity[i, 0] - velocity[j, 0] + strain_x * rx
-            dvy = velocity[i, 1] - velocity[j, 1] + strain_y * ry
-            spin_sum = ri * omega[i] + rj * omega[j]
-            relative_spin = omega[i] - omega[j]
-            alpha = (ri + rj) * inv_dist
-            gap = dist - ri - rj
-            angle_j = angle[j]
-            wall_shift = 0.0
-        else:
-            wall = j - n
-            rj = 0.0
-            nx = w.normal[wall, 0]
-            ny = w.normal[wall, 1]
-            dist = nx * position[i, 0] + ny * position[i, 1] - w.offset[wall]
-            gap = dist - ri
-            if gap >= d0 and not touching(status[k]):
-                if status[k] != STATUS_NONE:
-                    opening += forget(k, status, ct.tangential_spring, ct.rolling_spring, ct.normal_force,
-                                      ct.tangential_force, laws.kt, laws.kr)
-                if store:
-                    surface_gap[k] = gap
-                continue
-            rx = dist * nx
-            ry = dist * ny
-            wall_vx = w.velocity[wall] * nx - w.tangential_velocity[wall] * ny
-            wall_vy = w.velocity[wall] * ny + w.tangential_velocity[wall] * nx
-            dvx = velocity[i, 0] - wall_vx
-            dvy = velocity[i, 1] - wall_vy
-            spin_sum = ri * omega[i]
-            relative_spin = omega[i]
-            alpha = 1.0
-            angle_j = 0.0
-            wall_shift = w.tangential_position[wall]
-        tx = -ny
-        ty = nx
-        vn = dvx * nx + dvy * ny
-        vt = dvx * tx + dvy * ty
-        if whole_step:
-            vn_d, vt_d, spin_d, relative_spin_d = predicted_relative_motion(
-                p.predicted_motion, i, j, is_wall, wall_vx, wall_vy, strain_x * rx, strain_y * ry, nx, ny, ri, rj)
-        else:
-            vn_d = vn
-            vt_d = vt
-            spin_d = spin_sum
-            relative_spin_d = relative_spin
-        eta = laws.eta_factor * ct.root_reduced_mass[k]
-        if gap < 0.0:
-            overlap = -gap
-            limit_radius = ri if is_wall else min(ri, rj)
-            if overlap > overlap_limit * limit_radius:
-                overlapping += 1
-                max_overlap = max(max_overlap, overlap / limit_radius)
-            fresh = status[k] == STATUS_NONE or status[k] == STATUS_COHESIVE
-            if fresh:
-                anchor(ct, k, angle, i, j, nx, ny, is_wall, position[i, 0], position[i, 1], wall_shift)
-            phi = math.atan2(ny, nx) if tangential.reads_direction(tangential_model) else 0.0
-            row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, angle[i], angle_j, ct.anchor_angle_i[k],
-                              ct.anchor_angle_j[k], is_wall, position[i, 0], position[i, 1], wall_shift, phi)
-            rolling = laws.kr > 0.0
-            inv_reduced = p.inv_inertia[i] + (0.0 if is_wall else p.inv_inertia[j]) if rolling else 0.0
-            (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, slip_energy, rolling_work,
-             rolling_slip) = touching_laws(normal_model, tangential_model, laws, dt, whole_step, overlap, ri, rj,
-                                           is_wall, eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, fresh,
-                                           0.0 if fresh else ct.tangential_spring[k], row, rolling, inv_reduced,
-                                           0.0 if fresh or not rolling else ct.rolling_spring[k], relative_spin,
-                                           relative_spin_d)
-            damping += normal_damping
-            if tangential.whole_step_dashpots(tangential_model):
-                damping += tangential_work
-            else:
-                # LAMMPS's model (the only one with half-step dashpots) limits the dashpot's force with the
-                # spring's and rescales the two together, which can load the spring as it slides, and a
-                # contact can chatter between sticking and sliding: split, either tally could go negative;
-                # as one, only by what the rescale itself creates
-                sliding += tangential_work
-            if state != STATUS_STICK:
-                sliding += slip_energy
-                ct.anchor_angle_i[k] += 0.5 * slip / ri
-                ct.anchor_angle_j[k] += 0.5 * slip if is_wall else 0.5 * slip / rj
-            ct.tangential_spring[k] = spring
-            status[k] = state
-            if rolling:
-                damping += rolling_work
-                rolling_loss += rolling_slip
-                ct.rolling_spring[k] = roll
-        else:
-            fn, damping, opening = separated_row(ct, k, laws, gap, vn_d, eta, dt, whole_step, damping, opening)
-            ft = 0.0
-            moment = 0.0
-            if fn == 0.0 and status[k] != STATUS_COHESIVE:
-                if store:
-                    surface_gap[k] = gap
-                continue
-        if store:
-            ct.normal_force[k] = fn
-            ct.tangential_force[k] = ft
-            surface_gap[k] = gap
-        ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
-        fx = fn * nx + ft_centre * tx
-        fy = fn * ny + ft_centre * ty
-        force_buffer[c, i, 0] += fx
-        force_buffer[c, i, 1] += fy
-        force_buffer[c, i, 2] += -ri * ft + moment
-        if is_wall:
-            wall_buffer[c, j - n] -= fx * nx + fy * ny
-            wall_work += (fx * wall_vx + fy * wall_vy) * dt
-            vxx -= fx * position[i, 0]
-            vxy -= fx * position[i, 1]
-            vyx -= fy * position[i, 0]
-            vyy -= fy * position[i, 1]
-        else:
-            force_buffer[c, j, 0] -= fx
-            force_buffer[c, j, 1] -= fy
-            force_buffer[c, j, 2] += -rj * ft - moment
-            if image[k, 0] != 0 or image[k, 1] != 0:
-                vxx, vxy, vyx, vyy = image_virial(fx, fy, image[k, 0] * length_x, image[k, 1] * length_y, vxx, vxy,
-                                                  vyx, vyy)
+
+@njit(**KERNEL)
+def pair_geometry(p, image, k, i, j, length_x, length_y, strain_x, strain_y, reach, status, store):
+    """Stage one for a pair of disks: ``(near, Geometry)``. A row not touching (by its ``status``)
+    whose centres are ``reach`` or more apart is not near, and only its gap (when ``store``) is computed."""
+    ri = p.radius[i]
+    rj = p.radius[j]
+    rx = p.position[i, 0] - p.position[j, 0] - image[k, 0] * length_x
+    ry = p.position[i, 1] - p.position[j, 1] - image[k, 1] * length_y
+    r2 = rx * rx + ry * ry
+    if r2 >= reach * reach and not touching(status):
+        gap = math.sqrt(r2) - ri - rj if store else 0.0
+        return False, Geometry(rj, 0.0, 0.0, rx, ry, 0.0, 0.0, 0.0, 0.0, 0.0, gap, 0.0, 0.0, 0.0, 0.0)
+    dist = math.sqrt(r2)
+    inv_dist = 1.0 / dist
+    return True, Geometry(rj, rx * inv_dist, ry * inv_dist, rx, ry,
+                          p.velocity[i, 0] - p.velocity[j, 0] + strain_x * rx,
+                          p.velocity[i, 1] - p.velocity[j, 1] + strain_y * ry,
+                          ri * p.omega[i] + rj * p.omega[j], p.omega[i] - p.omega[j], (ri + rj) * inv_dist,
+                          dist - ri - rj, p.angle[j], 0.0, 0.0, 0.0)
+
+
+@njit(**KERNEL)
+def wall_geometry(p, w, i, wall, d0, status):
+    """Stage one for a disk and a wall: ``(near, Geometry)``; a row not touching (by its ``status``)
+    with a gap of ``d0`` or more is not near."""
+    ri = p.radius[i]
+    nx = w.normal[wall, 0]
+    ny = w.normal[wall, 1]
+    dist = nx * p.position[i, 0] + ny * p.position[i, 1] - w.offset[wall]
+    gap = dist - ri
+    if gap >= d0 and not touching(status):
+        return False, Geometry(0.0, nx, ny, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, gap, 0.0, 0.0, 0.0, 0.0)
+    wall_vx = w.velocity[wall] * nx - w.tangential_velocity[wall] * ny
+    wall_vy = w.velocity[wall] * ny + w.tangential_velocity[wall] * nx
+    return True, Geometry(0.0, nx, ny, dist * nx, dist * ny, p.velocity[i, 0] - wall_vx, p.velocity[i, 1] - wall_vy,
+                          ri * p.omega[i], p.omega[i], 1.0, gap, 0.0, w.tangential_position[wall], wall_vx, wall_vy)
+
+
+@njit(**KERNEL)
+def far_row(ct, k, laws, gap, store, opening):
+    """A row out of reach: its history forgotten if it had one (the released energy added to
+    ``opening``, returned), its gap kept when ``store``."""
+    if ct.status[k] != STATUS_NONE:
+        opening += forget(k, ct.status, ct.tangential_spring, ct.rolling_spring, ct.normal_force, ct.tangential_force,
+                          laws.kt, laws.kr)
+    if store:
+        ct.surface_gap[k] = gap
+    return opening
+
+
+@njit(**KERNEL, inline="always")
+def touching_row(p, ct, k, i, j, g, is_wall, laws, tangential_model, normal_model, dt, whole_step, eta, rates,
+                 tallies):
+    """Stage two for a row that overlaps: its anchors set if it is fresh, its laws
+    (:func:`granlab.engine.kernels.pair.touching_laws`), its history committed. ``tallies`` is
+    ``(damping, sliding, rolling, overlapping, max_overlap)`` before the row; returns ``F_n``, ``F_t``,
+    the rolling moment on i and the tallies with the row's shares added, in the loop's order."""
+    damping, sliding, rolling_loss, overlapping, max_overlap = tallies
+    ri = p.radius[i]
+    overlap = -g.gap
+    limit_radius = ri if is_wall else min(ri, g.rj)
+    if overlap > laws.overlap_limit * limit_radius:
+        overlapping += 1
+        max_overlap = max(max_overlap, overlap / limit_radius)
+    status = ct.status[k]
+    fresh = status == STATUS_NONE or status == STATUS_COHESIVE
+    if fresh:
+        anchor(ct, k, p.angle, i, j, g.nx, g.ny, is_wall, p.position[i, 0], p.position[i, 1], g.wall_shift)
+    phi = math.atan2(g.ny, g.nx) if tangential.reads_direction(tangential_model) else 0.0
+    row = RowGeometry(g.nx, g.ny, g.rx, g.ry, g.dvx, g.dvy, ri, g.rj, p.angle[i], g.angle_j, ct.anchor_angle_i[k],
+                      ct.anchor_angle_j[k], is_wall, p.position[i, 0], p.position[i, 1], g.wall_shift, phi, g.alpha)
+    rolling = laws.kr > 0.0
+    inv_reduced = p.inv_inertia[i] + (0.0 if is_wall else p.inv_inertia[j]) if rolling else 0.0
+    history = History(fresh, 0.0 if fresh else ct.tangential_spring[k], rolling, inv_reduced,
+                      0.0 if fresh or not rolling else ct.rolling_spring[k])
+    (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, slip_energy, rolling_work,
+     rolling_slip) = touching_laws(normal_model, tangential_model, laws, dt, whole_step, overlap, eta, row, rates,
+                                   history)
+    damping += normal_damping
+    if tangential.whole_step_dashpots(tangential_model):
+        damping += tangential_work
+    else:
+        # LAMMPS's model (the only one with half-step dashpots) limits the dashpot's force with the
+        # spring's and rescales the two together, which can load the spring as it slides, and a
+        # contact can chatter between sticking and sliding: split, either tally could go negative;
+        # as one, only by what the rescale itself creates
+        sliding += tangential_work
+    if state != STATUS_STICK:
+        sliding += slip_energy
+        ct.anchor_angle_i[k] += 0.5 * slip / ri
+        ct.anchor_angle_j[k] += 0.5 * slip if is_wall else 0.5 * slip / g.rj
+    ct.tangential_spring[k] = spring
+    ct.status[k] = state
+    if rolling:
+        damping += rolling_work
+        rolling_loss += rolling_slip
+        ct.rolling_spring[k] = roll
+    return fn, ft, moment, (damping, sliding, rolling_loss, overlapping, max_overlap)
+
+
+@njit(**KERNEL, inline="always")
+def gathered_row(ct, columns, c, q, k, radius, i, j, kr, tangential_model, store, tallies):
+    """Stage two for a row the gathered pass computed (:mod:`granlab.engine.kernels.gathered`): its
+    history committed from the columns; returns its force on i, its torques on i and j and the
+    tallies (as :func:`touching_row`'s) with its shares added, in the direct pass's order."""
+    damping, sliding, rolling_loss, overlapping, max_overlap = tallies
+    excess = columns[c, C_OVERLAP_EXCESS * BLOCK + q]
+    if excess != 0.0:
+        overlapping += 1
+        max_overlap = max(max_overlap, excess)
+    damping += columns[c, C_NORMAL_DAMPING * BLOCK + q]
+    if tangential.whole_step_dashpots(tangential_model):
+        damping += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
+    else:
+        sliding += columns[c, C_TANGENTIAL_WORK * BLOCK + q]
+    state = int(columns[c, C_STATUS * BLOCK + q])
+    if state != STATUS_STICK:
+        slip = columns[c, C_SLIP * BLOCK + q]
+        sliding += columns[c, C_SLIDING * BLOCK + q]
+        ct.anchor_angle_i[k] += 0.5 * slip / radius[i]
+        ct.anchor_angle_j[k] += 0.5 * slip / radius[j]
+    ct.tangential_spring[k] = columns[c, C_SPRING * BLOCK + q]
+    ct.status[k] = state
+    if kr > 0.0:
+        damping += columns[c, C_ROLLING_WORK * BLOCK + q]
+        rolling_loss += columns[c, C_ROLLING_SLIP * BLOCK + q]
+        ct.rolling_spring[k] = columns[c, C_ROLL * BLOCK + q]
+    if store:
+        ct.normal_force[k] = columns[c, C_FN * BLOCK + q]
+        ct.tangential_force[k] = columns[c, C_FT * BLOCK + q]
+        ct.surface_gap[k] = columns[c, C_GAP * BLOCK + q]
+    return (columns[c, C_FX * BLOCK + q], columns[c, C_FY * BLOCK + q], columns[c, C_TORQUE_I * BLOCK + q],
+            columns[c, C_TORQUE_J * BLOCK + q], (damping, sliding, rolling_loss, overlapping, max_overlap))
+
+
+@njit(**KERNEL)
+def dashpot_rates(p, i, j, is_wall, g, strain_x, strain_y, whole_step):
+    """The row's :data:`Rates`: the relative velocities the springs take (half-step) and the ones the
+    dashpots take (:func:`predicted_relative_motion` with ``whole_step``, else the same)."""
+    vn = g.dvx * g.nx + g.dvy * g.ny
+    vt = g.dvx * -g.ny + g.dvy * g.nx
+    if whole_step:
+        vn_d, vt_d, spin_d, relative_spin_d = predicted_relative_motion(
+            p.predicted_motion, i, j, is_wall, g.wall_vx, g.wall_vy, strain_x * g.rx, strain_y * g.ry, g.nx, g.ny,
+            p.radius[i], g.rj)
+        return Rates(vn_d, vt, vt_d, g.spin_sum, spin_d, g.relative_spin, relative_spin_d)
+    return Rates(vn, vt, vt, g.spin_sum, g.spin_sum, g.relative_spin, g.relative_spin)
+
+
+@njit(**KERNEL)
+def add_pair_force(force_buffer, c, i, j, fx, fy, torque_i, torque_j, image, k, length_x, length_y, virial):
+    """Stage three for a pair: the force on i and its opposite on j, the torques, into chunk ``c``'s
+    buffer; ``virial`` ``(vxx, vxy, vyx, vyy)`` corrected for a row through a periodic image."""
+    force_buffer[c, i, 0] += fx
+    force_buffer[c, i, 1] += fy
+    force_buffer[c, i, 2] += torque_i
+    force_buffer[c, j, 0] -= fx
+    force_buffer[c, j, 1] -= fy
+    force_buffer[c, j, 2] += torque_j
+    if image[k, 0] != 0 or image[k, 1] != 0:
+        vxx, vxy, vyx, vyy = virial
+        return image_virial(fx, fy, image[k, 0] * length_x, image[k, 1] * length_y, vxx, vxy, vyx, vyy)
+    return virial
+
+
+@njit(**KERNEL)
+def add_wall_force(force_buffer, wall_buffer, c, i, wall, fx, fy, torque_i, g, x, y, dt, wall_work, virial):
+    """Stage three for a wall: the force on disk i and its push on the wall along its normal; the
+    wall's work on the disk added to ``wall_work`` and the virial corrected (returned)."""
+    force_buffer[c, i, 0] += fx
+    force_buffer[c, i, 1] += fy
+    force_buffer[c, i, 2] += torque_i
+    wall_buffer[c, wall] -= fx * g.nx + fy * g.ny
+    wall_work += (fx * g.wall_vx + fy * g.wall_vy) * dt
+    vxx, vxy, vyx, vyy = virial
+    return wall_work, (vxx - fx * x, vxy - fx * y, vyx - fy * x, vyy - fy * y)
+
+
+@njit(**KERNEL)
+def write_tallies(tally_buffer, c, tallies, wall_work, virial, opening):
+    """Stage four: chunk ``c``'s tallies (``TALLY_*``)."""
+    damping, sliding, rolling_loss, overlapping, max_overlap = tallies
     tally_buffer[c, TALLY_DAMPING] = damping
     tally_buffer[c, TALLY_SLIDING] = sliding
     tally_buffer[c, TALLY_ROLLING] = rolling_loss
     tally_buffer[c, TALLY_WALL_WORK] = wall_work
-    tally_buffer[c, TALLY_VXX] = vxx
-    tally_buffer[c, TALLY_VXY] = vxy
-    tally_buffer[c, TALLY_VYX] = vyx
-    tally_buffer[c, TALLY_VYY] = vyy
+    tally_buffer[c, TALLY_VXX] = virial[0]
+    tally_buffer[c, TALLY_VXY] = virial[1]
+    tally_buffer[c, TALLY_VYX] = virial[2]
+    tally_buffer[c, TALLY_VYY] = virial[3]
     tally_buffer[c, TALLY_OVERLAPPING] = overlapping
     tally_buffer[c, TALLY_MAX_OVERLAP] = max_overlap
     tally_buffer[c, TALLY_OPENING] = opening
+
+
+@njit(**KERNEL)
+def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
+    """Rows ``[c count / n_chunks, (c + 1) count / n_chunks)`` into chunk buffer ``c``, with the laws
+    of tangential model ``tangential_model`` (a compile-time code), in four stages: a row's geometry
+    (:func:`pair_geometry`, :func:`wall_geometry`), the laws of a touching row (:func:`touching_row`,
+    or :func:`gathered_row` for a row the gathered pass computed; :func:`separated_row` for one that
+    does not overlap), its force added to the chunk's buffers (:func:`add_pair_force`,
+    :func:`add_wall_force`), and the chunk's tallies (:func:`write_tallies`). The stages that carry
+    the laws are inlined at Numba's level (as :func:`granlab.engine.kernels.pair.touching_laws`); the
+    others are left to LLVM, which inlines them: forced, the direct pass took 5 % longer a row.
+    Each stage adds its shares to the tallies in the order of the loop before it was staged: the
+    sums, and so the runs, are the same bit for bit."""
+    literally(tangential_model)
+    dt, n_chunks = run.dt, run.n_chunks
+    force_buffer, wall_buffer = ws.force_buffer, ws.wall_buffer
+    length_x = cell.length[0]
+    length_y = cell.length[1]
+    strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
+    strain_y = cell.rate[1] / length_y if length_y > 0.0 else 0.0
+    count = ct.count[0]
+    n = uint64(p.position.shape[0])
+    laws = chunk_laws(law, run.max_overlap)
+    # without a dashpot the dashpots' velocities multiply zero: the half-step ones serve, unread
+    whole_step = tangential.whole_step_dashpots(tangential_model) and (
+        laws.eta_factor > 0.0 or laws.gamma_t > 0.0 or laws.gamma_r_factor > 0.0)
+    lo = uint64(c * count // n_chunks)
+    hi = uint64((c + 1) * count // n_chunks)
+    for m in range(w.offset.shape[0]):
+        wall_buffer[c, m] = 0.0
+    tallies = (0.0, 0.0, 0.0, 0, 0.0)  # damping, sliding, rolling, overlapping, max_overlap
+    wall_work = opening = 0.0
+    virial = (0.0, 0.0, 0.0, 0.0)  # corrections: vxx, vxy, vyx, vyy
+    columns = ws.row_columns
+    gathered = run.gathered and run.normal_model == GATHERED
+    for k in range(lo, hi):
+        q = (k - lo) % BLOCK
+        if gathered and q == 0:
+            end = min(hi, k + BLOCK)
+            gather_block(p, cell.length, (strain_x, strain_y), ct, columns, c, k, end, laws.kr > 0.0,
+                         tangential.reads_direction(tangential_model))
+            compute_block(columns, c, end - k, laws, tangential_model, dt, run.max_overlap, whole_step)
+        i = uint64(ct.particle_i[k])
+        j = uint64(ct.particle_j[k])
+        if gathered and columns[c, C_HOT * BLOCK + q] != 0.0:
+            fx, fy, torque_i, torque_j, tallies = gathered_row(ct, columns, c, q, k, p.radius, i, j, laws.kr,
+                                                               tangential_model, store, tallies)
+            virial = add_pair_force(force_buffer, c, i, j, fx, fy, torque_i, torque_j, ct.image, k, length_x,
+                                    length_y, virial)
+            continue
+        is_wall = j >= n
+        if is_wall:
+            near, g = wall_geometry(p, w, i, j - n, laws.d0, ct.status[k])
+        else:
+            near, g = pair_geometry(p, ct.image, k, i, j, length_x, length_y, strain_x, strain_y,
+                                    p.radius[i] + p.radius[j] + laws.d0, ct.status[k], store)
+        if not near:
+            opening = far_row(ct, k, laws, g.gap, store, opening)
+            continue
+        rates = dashpot_rates(p, i, j, is_wall, g, strain_x, strain_y, whole_step)
+        eta = laws.eta_factor * ct.root_reduced_mass[k]
+        if g.gap < 0.0:
+            fn, ft, moment, tallies = touching_row(p, ct, k, i, j, g, is_wall, laws, tangential_model,
+                                                   run.normal_model, dt, whole_step, eta, rates, tallies)
+        else:
+            fn, acts, tallies, opening = separated_row(ct, k, laws, g.gap, rates.vn_d, eta, dt, whole_step, tallies,
+                                                       opening)
+            ft = 0.0
+            moment = 0.0
+            if not acts:
+                if store:
+                    ct.surface_gap[k] = g.gap
+                continue
+        store_row(ct, k, fn, ft, g.gap, store)
+        ft_centre = tangential.centre_factor(tangential_model, g.alpha) * ft
+        fx = fn * g.nx + ft_centre * -g.ny
+        fy = fn * g.ny + ft_centre * g.nx
+        ri = p.radius[i]
+        if is_wall:
+            wall_work, virial = add_wall_force(force_buffer, wall_buffer, c, i, j - n, fx, fy, -ri * ft + moment, g,
+                                               p.position[i, 0], p.position[i, 1], dt, wall_work, virial)
+        else:
+            virial = add_pair_force(force_buffer, c, i, j, fx, fy, -ri * ft + moment, -g.rj * ft - moment, ct.image,
+                                    k, length_x, length_y, virial)
+    write_tallies(ws.tally_buffer, c, tallies, wall_work, virial, opening)

@@ -25,7 +25,7 @@ from . import tangential
 from .jit import KERNEL, njit
 from .laws import touching
 from .normal import GATHERED
-from .pair import touching_laws
+from .pair import History, Rates, touching_laws
 from .tangential import RowGeometry
 
 BLOCK = 128
@@ -134,13 +134,14 @@ def compute_block(columns, c, count, laws, tangential_model, dt, overlap_limit, 
         excess = overlap / limit_radius if overlap > overlap_limit * limit_radius else 0.0
         row = RowGeometry(nx, ny, rx, ry, dvx, dvy, ri, rj, columns[c, C_ANGLE_I * BLOCK + q],
                           columns[c, C_ANGLE_J * BLOCK + q], columns[c, C_ANCHOR_I * BLOCK + q],
-                          columns[c, C_ANCHOR_J * BLOCK + q], False, 0.0, 0.0, 0.0, columns[c, C_PHI * BLOCK + q])
+                          columns[c, C_ANCHOR_J * BLOCK + q], False, 0.0, 0.0, 0.0, columns[c, C_PHI * BLOCK + q],
+                          alpha)
+        rates = Rates(vn_d, vt, vt_d, spin_sum, spin_d, relative_spin, relative_spin_d)
+        history = History(False, columns[c, C_PREVIOUS * BLOCK + q], True, columns[c, C_INV_INERTIA * BLOCK + q],
+                          columns[c, C_PREVIOUS_ROLL * BLOCK + q])
         (fn, ft, moment, spring, state, slip, roll, normal_damping, tangential_work, sliding, rolling_work,
-         rolling_slip) = touching_laws(GATHERED, tangential_model, laws, dt, whole_step, overlap, ri, rj, False,
-                                       eta, vn_d, vt, vt_d, spin_sum, spin_d, alpha, False,
-                                       columns[c, C_PREVIOUS * BLOCK + q], row, True,
-                                       columns[c, C_INV_INERTIA * BLOCK + q], columns[c, C_PREVIOUS_ROLL * BLOCK + q],
-                                       relative_spin, relative_spin_d)
+         rolling_slip) = touching_laws(GATHERED, tangential_model, laws, dt, whole_step, overlap, eta, row, rates,
+                                       history)
         ft_centre = tangential.centre_factor(tangential_model, alpha) * ft
         columns[c, C_HOT * BLOCK + q] = 1.0 if columns[c, C_TOUCHED * BLOCK + q] != 0.0 and gap < 0.0 else 0.0
         columns[c, C_FX * BLOCK + q] = fn * nx + ft_centre * tx

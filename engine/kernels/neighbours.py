@@ -14,6 +14,7 @@ import numpy as np
 from ..state import STATUS_NONE
 from .jit import JIT, njit
 from .laws import root_reduced_mass, touching
+from .packing import neighbour_cell
 
 MAX_CELLS_PER_PARTICLE = 4
 
@@ -68,6 +69,27 @@ def _grid(wrapped, length, periodic, cell_size, n):
 
 
 @njit(**JIT)
+def _cell_lists(wrapped, origin, cells, width):
+    """The disks binned by cell: each disk's cell, and ``items[start[c]:start[c + 1]]`` the disks of cell ``c``."""
+    n = wrapped.shape[0]
+    cell_of = np.empty(n, dtype=np.int64)
+    start = np.zeros(cells[0] * cells[1] + 1, dtype=np.int64)
+    for i in range(n):
+        cx = min(cells[0] - 1, max(0, int((wrapped[i, 0] - origin[0]) / width[0])))
+        cy = min(cells[1] - 1, max(0, int((wrapped[i, 1] - origin[1]) / width[1])))
+        cell_of[i] = cy * cells[0] + cx
+        start[cell_of[i] + 1] += 1
+    for c in range(cells[0] * cells[1]):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        items[fill[cell_of[i]]] = i
+        fill[cell_of[i]] += 1
+    return cell_of, start, items
+
+
+@njit(**JIT)
 def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_offset, extra,
                 old, new, wrapped, wraps):
     """Build the candidate-pair table ``new`` and carry over the history of ``old``.
@@ -83,64 +105,36 @@ def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_
     is below ``extra``.
     """
     n = position.shape[0]
-    nw = wall_offset.shape[0]
     wrap_positions(position, length, periodic, wrapped, wraps)
-    cell_size = 2.0 * radius.max() + extra
-    origin, cells, width = _grid(wrapped, length, periodic, cell_size, n)
-    ncell = cells[0] * cells[1]
-    cell_of = np.empty(n, dtype=np.int64)
-    start = np.zeros(ncell + 1, dtype=np.int64)
-    for i in range(n):
-        cx = min(cells[0] - 1, max(0, int((wrapped[i, 0] - origin[0]) / width[0])))
-        cy = min(cells[1] - 1, max(0, int((wrapped[i, 1] - origin[1]) / width[1])))
-        cell_of[i] = cy * cells[0] + cx
-        start[cell_of[i] + 1] += 1
-    for c in range(ncell):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    items = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        items[fill[cell_of[i]]] = i
-        fill[cell_of[i]] += 1
-
+    origin, cells, width = _grid(wrapped, length, periodic, 2.0 * radius.max() + extra, n)
+    cell_of, start, items = _cell_lists(wrapped, origin, cells, width)
     capacity = new.particle_i.shape[0]
     count = 0
     for i in range(n):
         cx = cell_of[i] % cells[0]
         cy = cell_of[i] // cells[0]
         for oy in range(-1, 2):
-            gy = cy + oy
-            sy = 0
-            if gy < 0 or gy >= cells[1]:
-                if not periodic[1]:
-                    continue
-                sy = -1 if gy < 0 else 1
-                gy -= sy * cells[1]
+            inside_y, gy, sy = neighbour_cell(cy + oy, cells[1], periodic[1])
             for ox in range(-1, 2):
-                gx = cx + ox
-                sx = 0
-                if gx < 0 or gx >= cells[0]:
-                    if not periodic[0]:
-                        continue
-                    sx = -1 if gx < 0 else 1
-                    gx -= sx * cells[0]
-                c = gy * cells[0] + gx
-                for k in range(start[c], start[c + 1]):
-                    j = items[k]
-                    if j <= i:
-                        continue
-                    rx = wrapped[i, 0] - wrapped[j, 0] - sx * length[0]
-                    ry = wrapped[i, 1] - wrapped[j, 1] - sy * length[1]
-                    reach = radius[i] + radius[j] + extra
-                    if rx * rx + ry * ry < reach * reach:
-                        if count < capacity:
-                            new.particle_i[count] = i
-                            new.particle_j[count] = j
-                            new.image[count, 0] = sx
-                            new.image[count, 1] = sy
-                            new.root_reduced_mass[count] = root_reduced_mass(inv_mass[i], inv_mass[j])
-                        count += 1
-        for w in range(nw):
+                inside_x, gx, sx = neighbour_cell(cx + ox, cells[0], periodic[0])
+                if inside_x and inside_y:
+                    c = gy * cells[0] + gx
+                    for k in range(start[c], start[c + 1]):
+                        j = items[k]
+                        if j <= i:
+                            continue
+                        rx = wrapped[i, 0] - wrapped[j, 0] - sx * length[0]
+                        ry = wrapped[i, 1] - wrapped[j, 1] - sy * length[1]
+                        reach = radius[i] + radius[j] + extra
+                        if rx * rx + ry * ry < reach * reach:
+                            if count < capacity:
+                                new.particle_i[count] = i
+                                new.particle_j[count] = j
+                                new.image[count, 0] = sx
+                                new.image[count, 1] = sy
+                                new.root_reduced_mass[count] = root_reduced_mass(inv_mass[i], inv_mass[j])
+                            count += 1
+        for w in range(wall_offset.shape[0]):
             gap = wall_normal[w, 0] * wrapped[i, 0] + wall_normal[w, 1] * wrapped[i, 1] - wall_offset[w] - radius[i]
             if gap < extra:
                 if count < capacity:

@@ -31,12 +31,12 @@ from ...errors import RegistryError
 from ...params import TANGENTIAL
 
 RowGeometry = namedtuple("RowGeometry", "nx ny rx ry dvx dvy ri rj angle_i angle_j anchor_i anchor_j is_wall xi yi "
-                                        "wall_shift phi")
+                                        "wall_shift phi alpha")
 """What a model may read of a touching row: normal ``n``, branch vector ``r`` (for a wall, from the
 wall to the centre), relative velocity ``V`` of the centres, radii (``rj = 0`` for a wall), body
 angles and anchors (for a wall, ``anchor_j`` is along the wall and ``angle_j = 0``), the centre of
-disk i, how far the wall has slid along itself, and the direction of ``n``, ``phi = atan2(n_y, n_x)``
-(0 unless the model :func:`reads_direction`)."""
+disk i, how far the wall has slid along itself, the direction of ``n``, ``phi = atan2(n_y, n_x)``
+(0 unless the model :func:`reads_direction`), and ``alpha = (r_i + r_j)/|r|`` (1 for a wall)."""
 
 MODELS = {model.code: importlib.import_module(f".{model.key}", __name__) for model in TANGENTIAL.values()}
 _WHOLE_STEP_DASHPOTS = {model.code: model.whole_step_dashpots for model in TANGENTIAL.values()}
