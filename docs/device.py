@@ -1,0 +1,135 @@
+"""Speed on a machine with many cores (and a GPU): the reference system's particle-steps per second
+by disks and threads, what a rebuild of the contact table costs, and whether numba's CUDA target
+works there. One call, under four minutes on 16 cores; writes JSON.
+
+    python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick]
+
+On a machine without a registry (the lent GPU machines), install the checkout first with
+``docs/device.sh``, which runs this too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+SIZES = ((100, 2000), (316, 1000), (1000, 200))
+"""Lattice sides (10⁴, 10⁵, 10⁶ disks) and the steps timed at each: about a second and a half on one
+thread at each size; the two smaller ones see the table rebuilt as often as ``granlab bench``'s
+run does."""
+
+
+def processor() -> dict:
+    """What the figures were measured on: model, logical cores, vector extensions."""
+    model, flags = platform.processor(), ""
+    try:
+        with open("/proc/cpuinfo") as info:
+            for line in info:
+                if line.startswith("model name") and not model:
+                    model = line.split(":", 1)[1].strip()
+                if line.startswith("flags") and not flags:
+                    flags = line
+    except OSError:
+        pass
+    vectors = [name for name in ("avx2", "avx512f", "fma") if f" {name}" in flags]
+    return {"model": model, "cores": os.cpu_count(), "vectors": vectors}
+
+
+def thread_table(threads: list[int], sizes=SIZES) -> list[dict]:
+    """Particle-steps per second of the reference system at each size and thread count (the same
+    simulation carried on from one count to the next), with the rebuilds in the timed steps and the
+    time of one rebuild (serial) at each size."""
+    import numba
+
+    from granlab.engine import bench
+    from granlab.engine.kernels.integrate import INFO_REBUILDS
+
+    rows = []
+    for side, steps in sizes:
+        numba.set_num_threads(max(threads))
+        built = time.perf_counter()
+        sim = bench.reference_system(side)
+        sim.run(20)
+        built = time.perf_counter() - built
+        rebuild = bench.rebuild_seconds(sim, repeats=3)
+        for count in threads:
+            numba.set_num_threads(count)
+            sim.run(10)
+            rebuilds = sim.workspace.info[INFO_REBUILDS]
+            start = time.perf_counter()
+            sim.run(steps)
+            elapsed = time.perf_counter() - start
+            rebuilds = int(sim.workspace.info[INFO_REBUILDS] - rebuilds)
+            n = sim.particles.count
+            rows.append({"particles": n, "threads": count, "steps": steps, "seconds": elapsed,
+                         "particle_steps_per_s": n * steps / elapsed, "rebuilds": rebuilds,
+                         "rebuild_seconds": rebuild, "rebuild_share": min(1.0, rebuilds * rebuild / elapsed),
+                         "setup_seconds": built})
+            print(f"{n:>8} disks {count:>2} threads: {n * steps / elapsed / 1e6:8.1f} M particle-steps/s, "
+                  f"{rebuilds} rebuilds ({rebuild * 1e3:.1f} ms each)", flush=True)
+    return rows
+
+
+def cuda_probe() -> dict:
+    """Whether numba's CUDA target compiles and runs a kernel with float64 atomics here, and what a
+    launch costs. numba-cuda may still name ``numpy.row_stack`` (gone in numpy 2.5): aliased first."""
+    import numpy as np
+
+    if not hasattr(np, "row_stack"):
+        np.row_stack = np.vstack
+    try:
+        from numba import cuda
+
+        if not cuda.is_available():
+            return {"available": False}
+
+        @cuda.jit
+        def scatter(values, index, total):
+            k = cuda.grid(1)
+            if k < values.shape[0]:
+                cuda.atomic.add(total, index[k], values[k])
+
+        n = 1 << 20
+        values = cuda.to_device(np.ones(n))
+        index = cuda.to_device((np.arange(n) % 1024).astype(np.int64))
+        total = cuda.to_device(np.zeros(1024))
+        scatter[(n + 255) // 256, 256](values, index, total)
+        cuda.synchronize()
+        launches = 200
+        start = time.perf_counter()
+        for _ in range(launches):
+            scatter[(n + 255) // 256, 256](values, index, total)
+        cuda.synchronize()
+        elapsed = (time.perf_counter() - start) / launches
+        sums = total.copy_to_host()
+        device = cuda.get_current_device()
+        return {"available": True, "device": device.name.decode() if isinstance(device.name, bytes) else device.name,
+                "compute_capability": list(device.compute_capability), "atomics_correct": bool(
+                    np.all(sums == (launches + 1) * n / 1024)), "seconds_per_launch_1M_atomics": elapsed}
+    except Exception as error:  # the probe reports what failed; the table above stands
+        return {"available": False, "error": f"{type(error).__name__}: {error}"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="device.json")
+    parser.add_argument("--threads", default="1,2,4,8,16")
+    parser.add_argument("--quick", action="store_true", help="10⁴ and 10⁵ disks only (a check of the script)")
+    args = parser.parse_args()
+    import numba
+
+    threads = [t for t in map(int, args.threads.split(",")) if t <= numba.config.NUMBA_NUM_THREADS]
+    began = time.perf_counter()
+    result = {"processor": processor(), "numba": numba.__version__, "cuda": cuda_probe(),
+              "table": thread_table(threads, SIZES[:2] if args.quick else SIZES)}
+    result["seconds"] = time.perf_counter() - began
+    with open(args.out, "w") as out:
+        json.dump(result, out, indent=1)
+    print(json.dumps(result["cuda"]), f"{result['seconds']:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
