@@ -147,6 +147,23 @@ def nonnegative(name: str, value, allow_inf: bool = False) -> float:
     return value
 
 
+def friction_coefficient(name: str, value, largest: float = math.inf, slides: bool = False, holds: bool = False,
+                         why: str = "") -> float:
+    """The one rule of a friction coefficient (Coulomb's μ): a number from 0 up, or ``inf`` for
+    contacts that never slide. A context may ask more: at most ``largest`` below ``inf`` (the lab's
+    packings), contacts that can slide (``slides``: finite), that hold before they slide (``holds``:
+    above 0); the error says what is allowed, and ``why`` here."""
+    value = _number(name, value)
+    lowest = "above 0" if holds else "from 0"
+    upper = f"{lowest} to {largest:g}" if largest < math.inf else ("> 0" if holds else ">= 0")
+    allowed = f"a friction coefficient {upper}" + ("" if slides else ", or inf (no sliding)") + (
+        f" ({why})" if why else "")
+    never_slides = value == math.inf and not slides
+    if value < 0 or (holds and value == 0) or (slides and math.isinf(value)) or (value > largest and not never_slides):
+        raise ParameterError(name, value, allowed)
+    return value
+
+
 def fraction(name: str, value, of: str) -> float:
     """A number in (0, 1]: a fraction ``of`` something (the error names it)."""
     value = positive(name, value)
@@ -228,7 +245,7 @@ class ContactLaw(_Replaceable):
         set_ = object.__setattr__
         set_(self, "normal_stiffness", positive("normal_stiffness", self.normal_stiffness))
         set_(self, "tangential_stiffness", positive("tangential_stiffness", self.tangential_stiffness))
-        set_(self, "friction", nonnegative("friction", self.friction, allow_inf=True))
+        set_(self, "friction", friction_coefficient("friction", self.friction))
         zeta = nonnegative("damping_ratio", self.damping_ratio)
         if zeta >= 1.0:
             raise ParameterError("damping_ratio", zeta, "a fraction of critical damping in [0, 1)")

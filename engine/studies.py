@@ -30,7 +30,7 @@ from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
 from .observables import columns, touching
-from .params import STUDY_LIMITS, TANGENTIAL_MODELS, finite, nonnegative, positive, whole
+from .params import STUDY_LIMITS, TANGENTIAL_MODELS, finite, friction_coefficient, nonnegative, positive, whole
 from .protocols.cyclic import CyclicLoad, run_cycles
 from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
@@ -92,7 +92,7 @@ class RatchetStudy:
         if not 0 < positive("dt_factor", self.dt_factor) <= largest:
             raise ParameterError("dt_factor", self.dt_factor,
                                  f"at most {largest:.4g}: above, dt exceeds the stability bound of these disks")
-        nonnegative("friction", self.friction, allow_inf=True)
+        friction_coefficient("friction", self.friction)
         positive("amplitude", self.amplitude)
         nonnegative("gravity", self.gravity)
         self.load()

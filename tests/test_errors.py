@@ -14,7 +14,7 @@ from granlab.engine.io.scene import parse_scene
     ("normal_stiffness", 0.0, "positive"),
     ("normal_stiffness", -5.0, "positive"),
     ("tangential_stiffness", -1.0, "positive"),
-    ("friction", -0.1, ">= 0 or inf"),
+    ("friction", -0.1, "a friction coefficient >= 0, or inf (no sliding)"),
     ("damping_ratio", 1.0, "[0, 1)"),
     ("damping_ratio", -0.2, ">= 0"),
     ("friction", math.nan, "not NaN"),
@@ -154,7 +154,8 @@ def test_scene_errors_name_the_key_and_what_is_allowed():
     base = "[simulation]\nsteps = 10\n[[particles.disk]]\nx = 0\ny = 0\nr = 1\n"
     cases = {
         base + "[contact]\nfrction = 0.3\n": "unknown key contact.frction: allowed keys are cohesion_force",
-        base + "[contact]\nfriction = -0.3\n": "[contact] friction = -0.3 is not allowed: a number >= 0 or inf",
+        base + "[contact]\nfriction = -0.3\n":
+            "[contact] friction = -0.3 is not allowed: a friction coefficient >= 0, or inf (no sliding)",
         base + "[contact]\ntangential_model = 'spring'\n": "tangential_model = 'spring' is not allowed: one of",
         base.replace("steps = 10", "steps = -3"): "simulation.steps = -3 is not allowed: a whole number >= 0",
         base.replace("r = 1", "r = 'big'"): "particles.disk[0].r = 'big' is not allowed: a number",
@@ -192,3 +193,32 @@ def test_one_whole_number_check_names_both_bounds():
             whole("cycles", value, 1)
     with pytest.raises(ParameterError, match="seed = 4294967296 is not allowed: a whole number from 0 to 4294967295"):
         whole("seed", 2 ** 32, 0, 2 ** 32 - 1)
+
+
+def _stepper_with_friction(mu):
+    from granlab.engine.io.scene import load_scene
+    from granlab.engine.protocols.quasistatic import Targets, follow
+
+    sim = load_scene("block").build()
+    sim.set_law(friction=mu)
+    follow(sim, Targets(forces={0: (0.1, 0.0)}), steps=1)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: ContactLaw(friction=-0.2),
+     "friction = -0.2 is not allowed: a friction coefficient >= 0, or inf (no sliding)"),
+    (lambda: __import__("granlab.engine.studies", fromlist=["RatchetStudy"]).RatchetStudy(friction=-1.0),
+     "friction = -1.0 is not allowed: a friction coefficient >= 0, or inf (no sliding)"),
+    (lambda: __import__("granlab.engine.protocols.settings", fromlist=["LabSettings"]).LabSettings(friction=11.0),
+     "friction = 11.0 is not allowed: a friction coefficient from 0 to 10, or inf (no sliding)"),
+    (lambda: _stepper_with_friction(math.inf),
+     "friction = inf is not allowed: a friction coefficient >= 0 (the stepper follows contacts that can slide"),
+    (lambda: __import__("granlab.engine.protocols.teaching", fromlist=["block"]).block(mu=0.0),
+     "mu = 0.0 is not allowed: a friction coefficient > 0 (the block holds, then slides)"),
+])
+def test_a_friction_coefficient_has_one_rule_and_each_context_says_what_it_adds(make, message):
+    """ContactLaw, a ratchet study, the lab, the quasi-static stepper and the block of quasi-rigidity
+    Fig. 2 check μ with params.friction_coefficient: one wording, and what each context asks more."""
+    with pytest.raises(ParameterError) as raised:
+        make()
+    assert message in str(raised.value)

@@ -45,7 +45,7 @@ from ..analysis import stiffness
 from ..analysis.status import MAX_ENUMERATED_SPARSE, critical_contacts, enumerate_states, solve_status
 from ..errors import DivergenceError, GranLabError, ParameterError
 from ..kernels import normal as normal_laws
-from ..params import NORMAL, TANGENTIAL, Load
+from ..params import NORMAL, TANGENTIAL, Load, friction_coefficient
 from ..simulation import Simulation
 from ..state import KIND_FIXED, KIND_KINEMATIC, STATUS_SLIDE_NEG, STATUS_SLIDE_POS, STATUS_STICK, WALL_FORCE
 
@@ -129,8 +129,8 @@ class _Packing:
         if law.rolling_stiffness > 0:
             raise ParameterError("rolling_stiffness", law.rolling_stiffness,
                                  "0: the stepper follows contacts without rolling resistance")
-        if not np.isfinite(law.friction):
-            raise ParameterError("friction", law.friction, "a finite friction coefficient")
+        friction_coefficient("friction", law.friction, slides=True,
+                             why="the stepper follows contacts that can slide, on the Coulomb cone")
         self.law = law
         self.n = len(snap.radii)
         self.radii = snap.radii.copy()

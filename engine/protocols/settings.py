@@ -8,14 +8,14 @@ from dataclasses import dataclass
 
 
 from ..errors import ParameterError
-from ..params import ContactLaw, finite, nonnegative, positive, whole
+from ..params import ContactLaw, finite, friction_coefficient, nonnegative, positive, whole
 
 CONTROL_LABELS = {
     "particles": "Disks N", "seed": "Seed", "pressure": "Pressure P0", "amplitude": "Amplitude Δσ",
     "period": "Period T", "phase": "Loading phase φ", "friction": "Friction μ", "rolling_friction": "Rolling friction μr",
     "rolling_stiffness": "Rolling stiffness Kr", "cohesion_force": "Cohesion F0", "cohesion_range": "Cohesion range D0",
-    "normal_model": "Normal spring", "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ", "speed": "Speed",
-    "frames_per_cycle": "Frames kept",
+    "normal_model": "Normal spring", "tangential_model": "Tangential spring", "damping_ratio": "Damping ζ",
+    "speed": "Speed", "frames_per_cycle": "Frames kept",
 }
 """The name each control has on the lab's page."""
 
@@ -64,9 +64,7 @@ class LabSettings:
                          cohesion_range=self.cohesion_range, normal_model=self.normal_model,
                          tangential_model=self.tangential_model,
                          damping_ratio=self.damping_ratio)
-        if MAX_FRICTION < law.friction < math.inf:  # the law took any μ >= 0; the lab's packings stop sliding here
-            raise ParameterError("friction", self.friction, f"a friction coefficient from 0 to {MAX_FRICTION:g}, or inf "
-                                                            f"(no sliding)")
+        friction_coefficient("friction", law.friction, largest=MAX_FRICTION)  # the lab's packings stop sliding here
 
     def replace(self, **changes) -> "LabSettings":
         names = {f.name for f in dataclasses.fields(self)}

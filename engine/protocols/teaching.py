@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParameterError
-from ..params import TANGENTIAL, ContactLaw, Integration, Wall, nonnegative, positive
+from ..params import TANGENTIAL, ContactLaw, Integration, Wall, friction_coefficient, nonnegative, positive
 from ..simulation import Simulation
 from ..state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS, ParticleState
 
@@ -207,9 +207,7 @@ def block(mu: float = 0.5, zeta: float = 0.7, dt: float | None = None, model: st
     below the limit and the block at rest, and the work friction did on the block during each
     episode of sliding (it must be negative: friction never does positive work).
     """
-    mu = positive("mu", mu)
-    if math.isinf(mu):
-        raise ParameterError("mu", mu, "a finite friction coefficient (the block must be able to slide)")
+    mu = friction_coefficient("mu", mu, slides=True, holds=True, why="the block holds, then slides")
     positive("normal_load", normal_load)
     positive("peak_ratio", peak_ratio)
     positive("ramp_time", ramp_time)
