@@ -74,7 +74,8 @@ def stability_bound(law: ContactLaw, mass: np.ndarray, radius: np.ndarray, inert
     inv_m = float(np.max(1.0 / mass))
     inv_i = float(np.max(1.0 / inertia))
     inv_t = float(np.max(1.0 / mass + radius ** 2 / inertia))
-    rates = [largest_stiffness(law.normal_model, law.normal_stiffness, radius, max_overlap) * inv_m, law.tangential_stiffness * inv_t, law.rolling_stiffness * inv_i]
+    normal = largest_stiffness(law.normal_model, law.normal_stiffness, radius, max_overlap)
+    rates = [normal * inv_m, law.tangential_stiffness * inv_t, law.rolling_stiffness * inv_i]
     if law.cohesion_range > 0:
         rates.append(law.cohesion_force / law.cohesion_range * inv_m)
     omega_max = math.sqrt(2.0 * Z_MAX * max(rates))

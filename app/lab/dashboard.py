@@ -312,7 +312,8 @@ class Dashboard:
         live = [(self.phase, "phase"), (self.amplitude, "amplitude"), (self.pressure, "pressure"),
                 (self.period, "period"), (self.rolling_friction, "rolling_friction"),
                 (self.rolling_stiffness, "rolling_stiffness"), (self.cohesion_force, "cohesion_force"),
-                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"), (self.normal, "normal_model"),
+                (self.cohesion_range, "cohesion_range"), (self.model, "tangential_model"),
+                (self.normal, "normal_model"),
                 (self.frames_kept, "frames_per_cycle")]
         for widget, key in live:
             widget.param.watch(lambda e, key=key: self._control(key, e.new), "value")

@@ -153,7 +153,8 @@ def tangent_normal_stiffness(law, overlap, ri, rj, is_wall) -> np.ndarray:
 
 def rows(overlap, ri, rj, is_wall) -> tuple[np.ndarray, ...]:
     """Columns of contacts as the normal laws' row kernels take them (float, float, float, bool)."""
-    return (*(np.ascontiguousarray(a, dtype=float) for a in (overlap, ri, rj)), np.ascontiguousarray(is_wall, dtype=bool))
+    columns = (np.ascontiguousarray(a, dtype=float) for a in (overlap, ri, rj))
+    return (*columns, np.ascontiguousarray(is_wall, dtype=bool))
 
 
 def network(snapshot, cell_lengths=None) -> Network:
