@@ -600,6 +600,13 @@ class Simulation:
         self.integration = integration
         return self.dt
 
+    def fit_dt(self, duration: float) -> int:
+        """Shorten the time step, never lengthen it, to divide ``duration`` into whole steps (a load
+        cycle, or what is left of one, ends on a step); returns their count."""
+        steps = math.ceil(positive("duration", duration) / self.dt - 1e-9)
+        self.set_dt(duration / steps)
+        return steps
+
     def set_cell_stress(self, stress: float, max_strain_rate: float | None = None) -> None:
         """Put both axes of a periodic cell under isotropic stress control at ``stress``
         (Gilabert Eq. 3), measuring strains from the current lengths."""

@@ -86,9 +86,7 @@ def apply_load(sim: Simulation, load: CyclicLoad, start: float | None = None) ->
 
 def steps_per_cycle(sim: Simulation, load: CyclicLoad) -> int:
     """Make the time step divide the period exactly (never larger than it was); returns T / dt."""
-    steps = math.ceil(load.period / sim.dt - 1e-9)
-    sim.set_dt(load.period / steps)
-    return steps
+    return sim.fit_dt(load.period)
 
 
 def box_lengths(sim: Simulation) -> tuple[float, float]:

@@ -143,7 +143,7 @@ class RatchetPreset(Preset):
             return
         remaining = self._cycle_end - sim.time
         if remaining > 0.5 * sim.dt:
-            sim.set_dt(remaining / math.ceil(remaining / sim.dt - 1e-9))
+            sim.fit_dt(remaining)
 
     def _lengths(self):
         lengths = self._sim.box_lengths()
@@ -186,7 +186,7 @@ class RatchetPreset(Preset):
         self.load = load
         self._start = apply_load(sim, load)
         sim.set_dt(None)
-        sim.set_dt(load.period / math.ceil(load.period / sim.dt - 1e-9))
+        sim.fit_dt(load.period)
         self._cycle_end = sim.time + load.period
         self._restart_clock()
 
