@@ -63,7 +63,7 @@ def census(command: str, repository: Path | None) -> dict:
         walls = []
         for _ in range(2):  # the first run with an empty cache, the second with what it left
             start = time.perf_counter()
-            done = subprocess.run([sys.executable, "-m", "granlab.app.cli", *command.split()], env=env, cwd=folder,
+            done = subprocess.run([sys.executable, "-m", "granlab.app.commands", *command.split()], env=env, cwd=folder,
                                   capture_output=True, text=True)
             walls.append(time.perf_counter() - start)
             if done.returncode != 0:

@@ -1,6 +1,6 @@
 """GranLab engine: a numba 2D discrete-element core for granular mechanics.
 
-Layers (imports point downwards only): ``cli``/``studies`` > ``io`` > ``analysis`` >
+Layers (imports point downwards only): ``studies``/``reproduce`` > ``io`` > ``analysis`` >
 ``protocols`` > ``simulation`` > ``kernels`` > ``state``/``params``.
 
 The names below are imported on first use: ``import granlab.engine.params`` (the command line's

@@ -218,7 +218,7 @@ def h5md_cases(folder: Path, rng: np.random.Generator, count: int) -> list[dict]
 
 def run_case(case: dict, folder: Path) -> dict:
     """``granlab analyze ARGS packing --json`` in a forked child (:mod:`tests.forked`)."""
-    from granlab.engine.cli import main
+    from granlab.app.commands import main
 
     out, err = folder / (case["name"] + ".out"), folder / (case["name"] + ".err")
     code, seconds = forked.run(main, ["analyze", *case["args"], "packing", "--json"], out, err, DEADLINE)

@@ -76,7 +76,7 @@ CASES = 330
 def make_bases(folder: Path) -> dict[str, Path]:
     """The run to its end and the run interrupted at half its steps, a frame and a checkpoint
     every 50 steps (this loads the kernels every case then finds loaded)."""
-    from granlab.engine.cli import run_scene
+    from granlab.app.commands.run import run_scene
 
     scene = folder / "scene.toml"
     scene.write_text(SCENE)
@@ -286,7 +286,7 @@ def _sound(path: Path) -> bool:
 
 def run_case(case: dict, folder: Path) -> dict:
     """``granlab ARGS`` in a forked child (:mod:`tests.forked`)."""
-    from granlab.app.cli import main
+    from granlab.app.commands import main
 
     home = folder / case["name"]
     out, err = home / "stdout", home / "stderr"

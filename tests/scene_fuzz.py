@@ -245,7 +245,7 @@ def named(line: str, keys: list[str], name: str) -> bool:
 
 def _start(case: dict, folder: Path) -> int:
     """``granlab run SCENE --out RUN.h5`` in a forked child (:mod:`tests.forked`)."""
-    from granlab.engine.cli import main
+    from granlab.app.commands import main
 
     run = folder / (case["name"] + ".h5")
     run.unlink(missing_ok=True)
@@ -286,7 +286,7 @@ def _finite_run_file(path: Path) -> bool:
 
 def _warm(folder: Path) -> None:
     """Each base scene run here once: the kernels it loads, every child inherits."""
-    from granlab.engine.cli import run_scene
+    from granlab.app.commands.run import run_scene
 
     for name, scene in BASES.items():
         path = folder / f"base-{name}.toml"

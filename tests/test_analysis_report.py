@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from granlab.engine import cli
+from granlab.app import commands as cli
 from granlab.engine.analysis import ANALYSES
 from granlab.engine.analysis import report as rp
 from granlab.engine.analysis import rigidity as rg

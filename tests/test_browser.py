@@ -768,7 +768,7 @@ def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
     kept = token_lab["data"] / ".presenter-address"
     assert kept.stat().st_mode & 0o777 == 0o600 and kept.read_text().strip() == token_lab["url"]
     # a second lab on the same folder would have written its own presenter's address over this one
-    second = subprocess.run([sys.executable, "-m", "granlab.app.cli", "serve", "--port", "0", "--tokens",
+    second = subprocess.run([sys.executable, "-m", "granlab.app.commands", "serve", "--port", "0", "--tokens",
                              "--data-dir", str(token_lab["data"])], capture_output=True, text=True, timeout=120)
     assert second.returncode == 2 and second.stderr.count("\n") == 1, second.stderr
     assert second.stderr.startswith(f"granlab serve: error: --data-dir {str(token_lab['data'])!r} is in use by "
@@ -957,7 +957,7 @@ def test_a_first_start_serves_at_once_shows_the_compile_on_the_page_then_the_pre
 
     cache = tmp_path / "cache"
     shutil.copytree(cache_root(), cache, ignore=shutil.ignore_patterns("integrate.rebuild-*", "integrate._start-*"))
-    process = subprocess.Popen([sys.executable, "-m", "granlab.app.cli", "serve", "--port", "0", "--data-dir",
+    process = subprocess.Popen([sys.executable, "-m", "granlab.app.commands", "serve", "--port", "0", "--data-dir",
                                 str(tmp_path / "data")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                env={**os.environ, "GRANLAB_CACHE_DIR": str(cache)})
     try:

@@ -13,7 +13,7 @@ from granlab.engine.params import TANGENTIAL_MODELS
 
 
 def granlab(*args, check=True):
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", *args], capture_output=True, text=True,
                              timeout=600)
     if check and process.returncode != 0:
         raise AssertionError(process.stderr)
@@ -149,7 +149,7 @@ def test_an_output_never_writes_over_an_input_or_an_existing_file_unless_forced(
     (["prepare", "--method", "compress", "--dt-safety", "0.5"], "--dt-safety = 0.5 is not allowed: an option of"),
 ])
 def test_absurd_sizes_are_refused_in_one_line_before_any_work(tmp_path, capsys, monkeypatch, args, message):
-    from granlab.engine import cli
+    from granlab.app import commands as cli
 
     monkeypatch.chdir(tmp_path)
     assert cli.main(args + ["--out", str(tmp_path / "out")]) == 2
@@ -171,7 +171,8 @@ def test_a_prepared_packings_run_file_keeps_the_step_it_was_made_with(tmp_path):
 
 
 def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
-    from granlab.engine import cli, reproduce
+    from granlab.app import commands as cli
+    from granlab.engine import reproduce
 
     failed = [{"case": "noncohesive", "seed": seed, "error": "DivergenceError: overlap"} for seed in (0, 1)]
     monkeypatch.setattr(reproduce, "run_reproduction", lambda *a, **k: {"failed": failed, "samples": failed})
@@ -182,7 +183,7 @@ def test_a_reproduction_whose_every_sample_failed_exits_2(monkeypatch, capsys):
 def test_every_analysis_refuses_a_frame_with_nan_positions_by_name(tmp_path, capsys):
     import h5py
 
-    from granlab.engine import cli
+    from granlab.app import commands as cli
 
     scene = tmp_path / "pair.toml"
     scene.write_text(PAIR)
@@ -221,7 +222,7 @@ def test_serve_refuses_an_address_or_data_folder_it_cannot_use_before_starting(t
             ("--port", "0", "--pause-without-pages", "nan"): "--pause-without-pages nan is not allowed",
         }
         for args, message in refusals.items():
-            process = subprocess.run([sys.executable, "-m", "granlab.app.cli", "serve", *args], capture_output=True,
+            process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "serve", *args], capture_output=True,
                                      text=True, timeout=120)
             assert process.returncode == 2 and process.stderr.count("\n") == 1, (args, process.stderr)
             assert process.stderr.startswith(f"granlab serve: error: {message}"), (args, process.stderr)
@@ -260,7 +261,7 @@ def test_output_cut_short_by_its_reader_ends_without_a_traceback():
     """``granlab analyze ... | head -1`` printed a BrokenPipeError traceback under the line. Here
     the reader is gone before the first line is written."""
     read, write = os.pipe()
-    process = subprocess.Popen([sys.executable, "-m", "granlab.engine.cli", "analyze", "tests/data/lammps/packing.dump",
+    process = subprocess.Popen([sys.executable, "-m", "granlab.app.commands", "analyze", "tests/data/lammps/packing.dump",
                                 "packing"], stdout=write, stderr=subprocess.PIPE, text=True,
                                cwd=os.path.dirname(os.path.dirname(__file__)))
     os.close(write)
@@ -270,7 +271,7 @@ def test_output_cut_short_by_its_reader_ends_without_a_traceback():
 
 HELP_PROBE = """
 import contextlib, io, json, sys
-from granlab.app.cli import main
+from granlab.app.commands import main
 with contextlib.redirect_stdout(io.StringIO()) as shown:
     try:
         main(sys.argv[1:])
@@ -296,7 +297,7 @@ def test_a_special_file_given_as_input_is_named_as_what_it_is(tmp_path, capsys):
     """Before: a FIFO and a link to /dev/zero were "does not exist"; a folder too, for a run file."""
     import os
 
-    from granlab.app.cli import main
+    from granlab.app.commands import main
 
     os.mkfifo(tmp_path / "pipe")
     (tmp_path / "zero").symlink_to("/dev/zero")
@@ -326,7 +327,7 @@ radius = 0.45
 
 def test_what_a_command_will_take_is_said_and_refused_before_any_work(tmp_path, capsys, monkeypatch):
     """Before: 10¹⁸ steps ran at "0 %" for ever, a 2000 × 2000 lattice reached 2.9 GB with no line."""
-    from granlab.app.cli import main
+    from granlab.app.commands import main
     from granlab.engine import costs
     from granlab.engine.io import outputs
 

@@ -35,7 +35,7 @@ def test_compression_overlaps_no_disk_much_deeper_than_at_rest(monkeypatch, capf
 
 def test_prepare_reports_progress_on_stderr_and_keeps_stdout_for_the_result(tmp_path):
     out = tmp_path / "box.h5"
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "prepare", "--method", "compress",
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "prepare", "--method", "compress",
                               "--particles", "400", "--out", str(out), "--json"], capture_output=True, text=True,
                              timeout=600)
     assert process.returncode == 0, process.stderr

@@ -72,7 +72,7 @@ def test_one_registry_names_the_tangential_models_for_the_kernels_the_command_li
     """engine.params.TANGENTIAL is the only list of the models: the kernels' modules and codes, the choices of
     the command line and the lab, and the closed path's prediction (Eq. 17's residue only for a
     path-dependent spring) come from it."""
-    from granlab.engine.cli import build_parser
+    from granlab.app.commands import build_parser
     from granlab.engine.kernels import tangential
     from granlab.engine.params import TANGENTIAL, TANGENTIAL_MODELS
     from granlab.engine.protocols.settings import LabSettings

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import granlab.engine.io.export as export_package
-from granlab.app.cli import build_parser
+from granlab.app.commands import build_parser
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
 from granlab.engine.analysis import stiffness as st
 from granlab.engine.analysis.packing import packing_stats
@@ -31,7 +31,7 @@ FRAMES = 3
 
 def granlab(*args, check=True):
     """The ``granlab`` command (with the lab's commands) in a process of its own."""
-    process = subprocess.run([sys.executable, "-m", "granlab.app.cli", *args], capture_output=True, text=True,
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", *args], capture_output=True, text=True,
                              timeout=600)
     if check and process.returncode != 0:
         raise AssertionError(process.stderr)
@@ -250,7 +250,7 @@ def stalled(f, index):
         time.sleep(600)
     return read(f, index)
 h5md.read_frame = stalled
-from granlab.app.cli import main
+from granlab.app.commands import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -317,7 +317,7 @@ def test_an_export_or_render_that_runs_out_of_room_says_so_in_one_line_and_leave
         run_file, tmp_path, command, out):
     """Under a file size limit as on a full disk (a real full tmpfs gave tracebacks, exit 1; the
     h5md export a segfault after 265 KB of them; the mp4 a broken file and exit 0)."""
-    process = subprocess.run([sys.executable, "-m", "granlab.app.cli", command[0], str(run_file), *command[1:], "--out",
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", command[0], str(run_file), *command[1:], "--out",
                               str(tmp_path / out), "--frames", ":"], capture_output=True, text=True, timeout=600,
                              preexec_fn=_small_file_limit)
     lines = [line for line in process.stderr.splitlines() if not line.startswith(("rendering frame", "exporting frame"))]

@@ -159,7 +159,7 @@ def test_a_damaged_file_of_a_killed_writer_is_named_in_one_line_and_never_waited
     path.write_bytes(_damage(killed_run.read_bytes(), how))
     for command in (["info", str(path)], ["analyze", str(path), "packing"]):
         start = time.perf_counter()
-        process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *command], capture_output=True, text=True,
+        process = subprocess.run([sys.executable, "-m", "granlab.app.commands", *command], capture_output=True, text=True,
                                  timeout=60)
         assert time.perf_counter() - start < 20.0
         if how == "whole":
@@ -230,7 +230,7 @@ def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
     scene_file.write_text(SCENE)
 
     def cli(*args):
-        process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+        process = subprocess.run([sys.executable, "-m", "granlab.app.commands", *args], capture_output=True, text=True,
                                  timeout=600)
         assert process.returncode == 0, process.stderr
         return json.loads(process.stdout)
@@ -250,7 +250,7 @@ def test_cli_resume_continues_to_the_end_of_the_scene(tmp_path):
 
 FULL_DISK = """
 import os, sys
-from granlab.engine.cli import main
+from granlab.app.commands import main
 real = os.statvfs
 CAPACITY = int(sys.argv[1])
 
@@ -284,7 +284,7 @@ def test_a_run_whose_file_the_disk_cannot_hold_is_refused_before_it_starts(tmp_p
         resource.setrlimit(resource.RLIMIT_FSIZE, (1_200_000, 1_200_000))
 
     out = tmp_path / "full.h5"
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", str(scene_file), "--out", str(out)],
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", str(scene_file), "--out", str(out)],
                              capture_output=True, text=True, timeout=600, preexec_fn=small_file_limit)
     assert process.returncode == 2 and process.stderr == (
         f"granlab run: error: --out {str(out)!r}: 81 frames of 60 disks need up to 1.8 MB; 1.2 MB free there: fewer "
@@ -314,7 +314,7 @@ def test_a_run_stopped_by_a_full_disk_says_so_in_one_line_and_its_file_resumes(t
         steps = f["particles/all/position/step"][:h5md.frame_count(f)]
         assert steps[0] == 0 and np.all(np.diff(steps) == 50) and checkpoint <= steps[-1] < failed_at
         assert h5md.read_checkpoint(f)["step"] == checkpoint
-    resumed = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", "--resume", str(out), "--json"],
+    resumed = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", "--resume", str(out), "--json"],
                              capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr
     assert json.loads(resumed.stdout)["steps"] == 4000
@@ -341,7 +341,7 @@ def test_bad_run_files_give_clear_errors(tmp_path):
     with h5md.open_run(tmp_path / "nockpt.h5") as f:
         with pytest.raises(h5md.RunFileError, match=r"frame 5 is out of range: .* holds frames 0..0"):
             h5md.read_frame(f, 5)
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "info", str(text)], capture_output=True,
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "info", str(text)], capture_output=True,
                              text=True)
     assert process.returncode == 2 and "is not a readable HDF5 file" in process.stderr
 
@@ -350,7 +350,7 @@ def test_a_killed_cli_run_resumes_from_its_last_periodic_checkpoint_bit_for_bit(
     scene_file = tmp_path / "long.toml"
     scene_file.write_text(SCENE.replace("steps = 4000", "steps = 400000\nrecord_every = 4000"))
     crash = tmp_path / "crash.h5"
-    command = [sys.executable, "-m", "granlab.engine.cli", "run", str(scene_file), "--json"]
+    command = [sys.executable, "-m", "granlab.app.commands", "run", str(scene_file), "--json"]
     process = subprocess.Popen(command + ["--out", str(crash), "--checkpoint-every", "2"], stdout=subprocess.DEVNULL)
     deadline = time.monotonic() + 120.0
     step = 0
@@ -377,7 +377,7 @@ def test_a_diverging_cli_run_writes_its_restored_last_good_state_as_the_last_che
     scene_file = tmp_path / "heavy.toml"
     scene_file.write_text(SCENE.replace("gravity = [0.0, -1.0]", "gravity = [0.0, -3e3]"))
     out = tmp_path / "heavy.h5"
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", str(scene_file), "--out", str(out),
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", str(scene_file), "--out", str(out),
                               "--frame-every", "10", "--checkpoint-every", "4"], capture_output=True, text=True,
                              timeout=600)
     assert process.returncode == 2
@@ -401,7 +401,7 @@ def test_a_file_whose_metadata_hdf5_reads_for_ever_is_named_damaged_after_ten_se
     damaged = tmp_path / "damaged.h5"
     damaged.write_bytes(bytes(data))
     start = time.perf_counter()
-    process = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", "--resume", str(damaged)],
+    process = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", "--resume", str(damaged)],
                              capture_output=True, text=True, timeout=120)
     assert time.perf_counter() - start < 30
     assert process.returncode == 2 and process.stderr.count("\n") == 1, process.stderr

@@ -4,7 +4,7 @@ machine."""
 
 import json
 
-from granlab.app import cli
+from granlab.app import commands as cli
 from granlab.app.lab import bench
 
 

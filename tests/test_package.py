@@ -48,8 +48,10 @@ def test_installed_under_one_name_and_lab_libraries_loaded_only_when_used(tmp_pa
     bring none of the lab's or the figures' libraries (they took 3.6-4.6 s of import before)."""
     outside = loaded("import granlab", tmp_path)
     assert "granlab" in outside and not outside & {"engine", "app", "numba", *HEAVY}
-    engine = loaded("import granlab.engine, granlab.engine.analysis.report, granlab.engine.cli", tmp_path)
+    engine = loaded("import granlab.engine, granlab.engine.analysis.report", tmp_path)
     assert not engine & set(HEAVY), engine & set(HEAVY)
+    commands = loaded("import granlab.app.commands", tmp_path)  # the parser: every command's options
+    assert not commands & {"numba", *HEAVY}, commands & {"numba", *HEAVY}
     for name in ("engine", "app"):
         probe = subprocess.run([sys.executable, "-c", f"import {name}"], capture_output=True, text=True, cwd=tmp_path)
         assert probe.returncode == 1 and f"No module named '{name}'" in probe.stderr

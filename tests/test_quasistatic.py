@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from granlab.engine.cli import main
+from granlab.app.commands import main
 from granlab.engine.errors import GranLabError, ParameterError
 from granlab.engine.io.scene import load_scene
 from granlab.engine.params import ContactLaw, Integration, PeriodicCell, Wall

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import granlab
-from granlab.engine import cli
+from granlab.app import commands as cli
 from granlab.engine.analysis import ANALYSES, Analysis, register
 from granlab.engine.io.h5md import RunWriter
 
@@ -133,7 +133,7 @@ def test_a_tangential_model_is_one_module_and_one_registry_line(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(tmp_path)}
     subprocess.run([sys.executable, "-c", script], env=env, check=True, cwd=tmp_path, timeout=300)
     for command in (["experiment"], ["bench"], ["study", "ratchet"]):
-        help_text = subprocess.run([sys.executable, "-m", "granlab.engine.cli", *command, "--help"], env=env,
+        help_text = subprocess.run([sys.executable, "-m", "granlab.app.commands", *command, "--help"], env=env,
                                    cwd=tmp_path, capture_output=True, text=True, check=True, timeout=300).stdout
         assert "twin" in help_text.split("--model")[1], command
 
@@ -235,18 +235,18 @@ def test_a_normal_law_is_one_module_and_one_registry_line(tmp_path):
     """)
     env = {**os.environ, "PYTHONPATH": str(tmp_path)}
     subprocess.run([sys.executable, "-c", script], env=env, check=True, cwd=tmp_path, timeout=300)
-    run = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "quasistatic", str(scene), "--force", "0=0,0.5",
+    run = subprocess.run([sys.executable, "-m", "granlab.app.commands", "quasistatic", str(scene), "--force", "0=0,0.5",
                           "--steps", "5"], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0 and "the target load is reached" in run.stdout, run.stdout + run.stderr
     scene.write_text(block.replace("[contact]\n", '[contact]\nnormal_model = "hooke"\n'))
-    run = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "run", str(scene)], env=env, cwd=tmp_path,
+    run = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", str(scene)], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2 and "'linear', 'area', 'power'" in run.stderr.replace("'power', 'linear', 'area'",
                                                                                     "'linear', 'area', 'power'"), \
         run.stderr
     law = root / "engine" / "kernels" / "normal" / "power.py"
     law.write_text(law.read_text().split("@njit(**KERNEL)\ndef stiffness")[0])
-    run = subprocess.run([sys.executable, "-m", "granlab.engine.cli", "info", str(scene)], env=env, cwd=tmp_path,
+    run = subprocess.run([sys.executable, "-m", "granlab.app.commands", "info", str(scene)], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
     assert "normal law 'power' does not register" in run.stderr and "has no stiffness" in run.stderr, run.stderr

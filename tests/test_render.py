@@ -9,7 +9,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from granlab.app.cli import main
+from granlab.app.commands import main
 from granlab.app.media.drawing import (CELL_COLOR, COMPRESSIVE_COLOR, COORDINATION_COLORS, ROTATION_LUT, WALL_COLOR,
                                  WATCHED_COLORS, disk_colors)
 from granlab.app.media.render import default_movie_frames, render_image, run_frames, write_movie

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from granlab.engine import ParameterError
-from granlab.engine.cli import _print_reproduce
+from granlab.app.commands.reproduce import _print_reproduce
 from granlab.engine.reproduce import (HOLE_RADIUS, METHOD1_COLUMNS, PHI_I, TABLE_II, TABLE_III, TABLE_IV, TABLE_V,
                                       TABLE_VII, Case, Published, Reproduction, gilabert_sample, published,
                                       resume_folder, run_reproduction, sample_key, start_folder, summarize)
@@ -28,7 +28,7 @@ NUMBER = re.compile(r"\d+\.\d+")
 
 
 def granlab(*args):
-    return subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "granlab.app.commands", *args], capture_output=True, text=True,
                           timeout=300)
 
 
@@ -321,7 +321,7 @@ def test_folders_of_two_sizes_are_summarised_as_one_series(tmp_path):
 
 def test_a_reproduction_interrupted_goes_on_from_its_folder(tmp_path):
     folder = tmp_path / "method2"
-    command = [sys.executable, "-m", "granlab.engine.cli", "reproduce", "gilabert-method2", "--particles", "30",
+    command = [sys.executable, "-m", "granlab.app.commands", "reproduce", "gilabert-method2", "--particles", "30",
                "--samples", "2", "--max-time", "40", "--workers", "1", "--json"]
     # Ctrl-C's default action, whatever this process inherited: a shell's background job ignores SIGINT
     process = subprocess.Popen([*command, "--out", str(folder)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,

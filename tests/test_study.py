@@ -14,7 +14,7 @@ from granlab.engine.studies import RatchetStudy, ratchet_sample, summarize
 
 
 def granlab(*args):
-    return subprocess.run([sys.executable, "-m", "granlab.engine.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "granlab.app.commands", *args], capture_output=True, text=True,
                           timeout=900)
 
 

@@ -502,7 +502,7 @@ SPAWN_OUTPUT_LINES = 200
 
 
 def spawn(data_dir: str | Path, *options: str, timeout: float = 900.0,
-          program: tuple[str, ...] = (sys.executable, "-m", "granlab.app.cli"), cwd: str | Path | None = None):
+          program: tuple[str, ...] = (sys.executable, "-m", "granlab.app.commands"), cwd: str | Path | None = None):
     """Start ``granlab serve --port 0 --data-dir data_dir *options`` in a child process (for
     benchmarks and tests; ``program`` the command that is ``granlab``) and wait until its engine has
     started; returns the process (its ``output``: the last lines it printed, read on in a thread),

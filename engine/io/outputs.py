@@ -121,7 +121,7 @@ def staged(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
     missing) once the block ends without error: the hidden folder renamed to ``folder`` if that
     did not exist, else file by file, those named in ``last`` last (the file that lists the
     others, the one a reader opens first). On an error, Ctrl-C or SIGTERM (see
-    :func:`granlab.engine.cli.run_args`) the files are removed; a command killed outright leaves a
+    :func:`granlab.app.commands.run_args`) the files are removed; a command killed outright leaves a
     hidden ``.NAME.PID-*.part`` folder (NAME the first of ``last``, else ``folder``'s; PID its
     writer's), removed by the next command that writes NAME there, and nothing under the names it
     was writing."""

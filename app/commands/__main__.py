@@ -1,0 +1,7 @@
+"""``python -m granlab.app.commands``: the ``granlab`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
