@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import resource
+from pathlib import Path
 
 from .errors import GranLabError
 
@@ -99,11 +100,25 @@ def run_files_bytes(files: int, frames: int, disks: int) -> int:
     return files * (frames * (FRAME_BYTES_PER_DISK * disks + 2 ** 12) + 2 * CHECKPOINT_BYTES_PER_DISK * disks + 2 ** 20)
 
 
-def check_disk(need: int, folder, what: str) -> None:
-    """Refuse ``need`` bytes of files in ``folder`` (its nearest existing parent) beyond its free room."""
-    from .io.outputs import room_for_one_file
+def free_bytes(folder) -> int:
+    """Room left for files in ``folder`` (its nearest existing parent)."""
+    folder = Path(folder).absolute()
+    while not folder.exists():
+        folder = folder.parent
+    status = os.statvfs(folder)
+    return status.f_bavail * status.f_frsize
 
+
+def room_for_one_file(folder) -> int:
+    """The largest file that may be written into ``folder``: its free bytes, or less under a file
+    size limit (``ulimit -f``)."""
+    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return min(free_bytes(folder), limit) if limit != resource.RLIM_INFINITY else free_bytes(folder)
+
+
+def check_disk(need: int, folder, what: str, fewer: str = "fewer samples, cycles or frames") -> None:
+    """Refuse ``need`` bytes of files in ``folder`` (its nearest existing parent) beyond its free room,
+    saying what ``fewer`` of would take less."""
     room = room_for_one_file(folder)
     if need > room:
-        raise CostError(f"{what} need up to {size(need)}; {size(room)} free there: fewer samples, cycles or frames, "
-                        f"or another disk")
+        raise CostError(f"{what} need up to {size(need)}; {size(room)} free there: {fewer}, or another disk")

@@ -329,7 +329,6 @@ def test_what_a_command_will_take_is_said_and_refused_before_any_work(tmp_path, 
     """Before: 10¹⁸ steps ran at "0 %" for ever, a 2000 × 2000 lattice reached 2.9 GB with no line."""
     from granlab.app.commands import main
     from granlab.engine import costs
-    from granlab.engine.io import outputs
 
     scene = tmp_path / "lattice.toml"
     scene.write_text(LATTICE.format(steps=10 ** 13))
@@ -344,7 +343,7 @@ def test_what_a_command_will_take_is_said_and_refused_before_any_work(tmp_path, 
                                        "900 disks need about 1.6 MB of memory (1800 bytes a disk); 1 MB is free to "
                                        "this process: use fewer disks\n")
     monkeypatch.undo()
-    monkeypatch.setattr(outputs, "room_for_one_file", lambda folder: 500_000)
+    monkeypatch.setattr(costs, "room_for_one_file", lambda folder: 500_000)
     assert main(["run", str(scene), "--out", str(tmp_path / "run.h5")]) == 2
     assert capsys.readouterr().err == (f"granlab run: error: --out {str(tmp_path / 'run.h5')!r}: 11 frames of 900 "
                                        "disks need up to 2 MB; 500 kB free there: fewer frames (--frame-every, "

@@ -124,13 +124,10 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
 def _check_run_file_room(sim, out: str, frames: int) -> None:
     """Refuse a run file the disk cannot hold; say what a large one will take before it is begun."""
     from granlab.engine.io import h5md
-    from granlab.engine.io.outputs import room_for_one_file
 
-    need, room = h5md.run_file_bytes(sim, frames), room_for_one_file(Path(out).absolute().parent)
-    if need > room:
-        raise costs.CostError(f"--out {out!r}: {frames} frames of {sim.particles.count} disks need up to "
-                              f"{costs.size(need)}; {costs.size(room)} free there: fewer frames (--frame-every, "
-                              f"simulation.record_every), or another disk")
+    need = h5md.run_file_bytes(sim, frames)
+    costs.check_disk(need, Path(out).absolute().parent, f"--out {out!r}: {frames} frames of {sim.particles.count} disks",
+                     fewer="fewer frames (--frame-every, simulation.record_every)")
     if need >= costs.ANNOUNCE_BYTES:
         print(f"writing {frames} frames to {out} (up to {costs.size(need)})", file=sys.stderr, flush=True)
 

@@ -15,13 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from granlab.engine import costs
+from granlab.engine.costs import room_for_one_file
 from granlab.engine.analysis.packing import packing_stats
 from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.analysis.states import PackingState, StateReader, detect_format, read_state
 from granlab.engine.errors import GranLabError
 from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.io import h5md
-from granlab.engine.io.outputs import room_for_one_file, staged
+from granlab.engine.io.outputs import staged
 from granlab.engine.protocols.presets import PRESETS
 
 

@@ -41,13 +41,14 @@ import numpy as np
 
 from .. import __version__
 from ..checkpoint import HUGE, CheckpointError
+from ..costs import free_bytes
 from ..errors import GranLabError, OutputError, WriteFailed, one_line
 from ..params import CELL_CONTROLS, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall
 from ..simulation import Simulation, cell_control_names, fixed_cell_control
 from ..state import CELL_NONE, STATUS_NAMES, ParticleState
 from . import superblock
 from .inputs import require_file
-from .outputs import failed_write_reason, free_bytes, occupied
+from .outputs import failed_write_reason, occupied
 
 ENERGY_FIELDS = ("kinetic", "stored", "gravity", "dissipated", "work_in", "balance", "dissipated_damping",
                  "dissipated_sliding", "dissipated_rolling", "dissipated_opening", "work_walls", "work_cell",

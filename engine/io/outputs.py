@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import re
-import resource
 import secrets
 import shutil
 import tempfile
@@ -74,22 +73,6 @@ def failed_write_reason(error: Exception) -> str | None:
         return error.strerror or str(error)
     found = re.search(r"errno = \d+, error message = '([^']*)'", str(error))
     return found.group(1) if found else None
-
-
-def free_bytes(folder: Path) -> int:
-    """Room left for files in ``folder`` (its nearest existing parent)."""
-    folder = Path(folder).absolute()
-    while not folder.exists():
-        folder = folder.parent
-    status = os.statvfs(folder)
-    return status.f_bavail * status.f_frsize
-
-
-def room_for_one_file(folder: Path) -> int:
-    """The largest file that may be written into ``folder``: its free bytes, or less under a file
-    size limit (``ulimit -f``)."""
-    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
-    return min(free_bytes(folder), limit) if limit != resource.RLIM_INFINITY else free_bytes(folder)
 
 
 def _alive(pid: int) -> bool:

@@ -10,9 +10,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from granlab.engine.costs import room_for_one_file
 from granlab.engine.errors import OutputError
 from granlab.engine.io import h5md
-from granlab.engine.io.outputs import room_for_one_file
 
 
 def files(out: Path, stem: str, indices: list[int]) -> list[Path]:
