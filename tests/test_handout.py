@@ -171,6 +171,19 @@ def test_the_colours_are_the_labs():
     assert handout_format.FORCE_CLASSES == drawing.FORCE_CLASSES
 
 
+def test_the_handout_and_the_viewers_scene_draw_with_one_script(handout):
+    """engine/io/export/packing.js draws the packing for both pages: the handout carries it, the lab
+    serves it in the viewers' scene, and neither page draws a disk of its own."""
+    from granlab.app.lab.server import VIEWER_SCENE
+
+    drawing = handout_format.DRAWING
+    assert "function drawPacking(ctx, p)" in drawing and drawing.count("ctx.arc(") == 1
+    page = handout.read_text()
+    assert drawing in page and page.count("ctx.arc(") == 1 and "drawPacking(ctx, {" in page
+    scene = VIEWER_SCENE.read_text()
+    assert "<script>%DRAWING%</script>" in scene and "ctx.arc(" not in scene and "drawPacking(ctx, {" in scene
+
+
 def test_a_run_not_saved_by_the_lab_gets_its_energy_z_phi_and_its_periodic_cell(tmp_path):
     from tests.test_export import FRAMES, compressed_run
 

@@ -48,6 +48,7 @@ from websockets.http11 import Request
 
 from granlab.engine.compilation import announced, compile_sets, missing, step_sets
 from granlab.engine.errors import GranLabError
+from granlab.engine.io.export.html import DRAWING
 from granlab.engine.io.jsonsafe import jsonable
 from granlab.engine.params import TANGENTIAL
 from granlab.engine.protocols.presets import PRESETS, preset_settings
@@ -176,7 +177,7 @@ class ViewerSceneHandler(PageHandler):
 
     def get(self):
         self.set_header("Content-Type", "text/html; charset=utf-8")
-        self.write(VIEWER_SCENE.read_bytes())
+        self.write(VIEWER_SCENE.read_text(encoding="utf-8").replace("%DRAWING%", DRAWING))
 
 
 def lab_kernel_sets(settings) -> tuple[list[str], list[str]]:

@@ -126,7 +126,8 @@ def write(frames, out: Path, stem: str, indices: list[int], run: dict) -> None:
     text = json.dumps(data, ensure_ascii=False, separators=(",", ":"), allow_nan=False)
     # inside <script>, "</" would close it: JSON allows "<" written as \u003c
     out.write_text(PAGE.replace("%TITLE%", _escape(data["title"])).replace("%STYLE%", STYLE)
-                   .replace("%DATA%", text.replace("<", "\\u003c")).replace("%SCRIPT%", SCRIPT), encoding="utf-8")
+                   .replace("%DATA%", text.replace("<", "\\u003c")).replace("%SCRIPT%", DRAWING + SCRIPT),
+                   encoding="utf-8")
 
 
 def _constants(params: dict) -> list[list[str]]:
@@ -237,7 +238,7 @@ def _settings_text(values: dict, keys) -> list[list[str]]:
             symbol = CONTROL_SYMBOLS.get(key, "")
             value = _value_text(values[key]) + ("°" if key == "phase" else "")
             name = SETTING_WORDS.get(key, key)
-            items.append([key, f"{name}: {value}" if symbol == "spring" else
+            items.append([key, f"{name}: {value}" if key.endswith("_model") else
                           f"{name} {symbol} = {value}" if symbol else f"{name} = {value}"])
     return items
 
@@ -726,6 +727,9 @@ select, button, input { font-size: 14px; }
 svg text { font-family: inherit; fill: #1a1a1a; }
 """
 
+DRAWING = (Path(__file__).parent / "packing.js").read_text(encoding="utf-8")
+"""The drawing of a packing the handout shares with the viewers' scene of the lab (``drawPacking``)."""
+
 SCRIPT = r"""
 "use strict";
 const D = JSON.parse(document.getElementById("handout-data").textContent);
@@ -797,101 +801,23 @@ function diskColor(k, i) {
   return P.sliding[A.slide[at]];
 }
 function drawScene() {
-  const box = $("scene-box"), w = box.clientWidth, h = box.clientHeight, dpr = window.devicePixelRatio || 1;
-  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
-    canvas.width = Math.round(w * dpr);
-    canvas.height = Math.round(h * dpr);
-  }
-  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-  ctx.fillStyle = "#ffffff";
-  ctx.fillRect(0, 0, w, h);
-  const [x0, x1, y0, y1] = D.frameBounds ? D.frameBounds[frame] : D.bounds, pad = 10;
-  if (w <= 2 * pad || h <= 2 * pad) return;
-  const s = Math.min((w - 2 * pad) / Math.max(x1 - x0, 1e-12), (h - 2 * pad) / Math.max(y1 - y0, 1e-12));
-  const ox = w / 2 - s * (x0 + x1) / 2, oy = h / 2 + s * (y0 + y1) / 2;
-  const X = x => ox + s * x, Y = y => oy - s * y;
-  const k = frame, base = D.radiusPerFrame ? k * N : 0, unit = D.meanRadius * s, C = D.colors;
-  const P = A.pos, S = A.seg, c0 = A.coff[k], c1 = A.coff[k + 1];
-  const segment = m => { ctx.moveTo(X(S[4 * m]), Y(S[4 * m + 1])); ctx.lineTo(X(S[4 * m + 2]), Y(S[4 * m + 3])); };
-  ctx.lineWidth = Math.max(0.3, 0.04 * unit);
-  ctx.strokeStyle = C.edge;
-  for (let i = 0; i < N; i++) {
-    ctx.beginPath();
-    ctx.arc(X(P[2 * (k * N + i)]), Y(P[2 * (k * N + i) + 1]), A.radius[base + i] * s, 0, 2 * Math.PI);
-    ctx.fillStyle = diskColor(k, i);
-    ctx.fill();
-    ctx.stroke();
-  }
-  if (showForces) {
-    const widths = [0, 1, 2, 3, 4].map(q => Math.max(1, (q + 1) / 5 * 0.4 * unit));
-    ctx.lineCap = "butt";
-    // a white border under every line first: red on a red disk would not show, and no border may cut a line
-    ctx.strokeStyle = "#ffffff";
-    for (let q = 0; q < 5; q++) {
-      ctx.lineWidth = widths[q] * 1.24;
-      ctx.beginPath();
-      for (let m = c0; m < c1; m++) if (A.fclass[m] === q) segment(m);
-      ctx.stroke();
-    }
-    for (let q = 0; q < 5; q++) {  // the strongest last, on top
-      for (let kind = 0; kind < C.kinds.length; kind++) {
-        ctx.strokeStyle = C.kinds[kind][1];
-        ctx.lineWidth = widths[q];
-        ctx.beginPath();
-        for (let m = c0; m < c1; m++) if (A.fclass[m] === q && A.kind[m] === kind) segment(m);
-        ctx.stroke();
-      }
-    }
-  }
-  const watchedWidth = Math.max(2, 0.3 * unit);
+  const box = $("scene-box"), w = box.clientWidth, h = box.clientHeight;
+  fitCanvas(canvas, ctx, w, h);
+  const k = frame, base = D.radiusPerFrame ? k * N : 0, C = D.colors, P = A.pos, S = A.seg;
+  const c0 = A.coff[k], c1 = A.coff[k + 1], watched = [];
   for (let m = c0; m < c1; m++) {
-    if (A.watch[m] < 0) continue;
-    const color = C.watched[A.watch[m] % C.watched.length];
-    for (const [paint, width] of [["#ffffff", watchedWidth + 2], [color, watchedWidth]]) {
-      ctx.strokeStyle = paint;
-      ctx.lineWidth = width;
-      ctx.beginPath();
-      segment(m);
-      ctx.stroke();
-    }
+    if (A.watch[m] >= 0) watched.push([S[4 * m], S[4 * m + 1], S[4 * m + 2], S[4 * m + 3],
+                                       C.watched[A.watch[m] % C.watched.length]]);
   }
-  ctx.strokeStyle = C.spoke;
-  ctx.lineWidth = Math.max(1, 0.12 * unit);
-  ctx.beginPath();
-  for (let i = 0; i < N; i++) {
-    const x = P[2 * (k * N + i)], y = P[2 * (k * N + i) + 1], r = A.radius[base + i], a = A.angle[k * N + i];
-    ctx.moveTo(X(x), Y(y));
-    ctx.lineTo(X(x + r * Math.cos(a)), Y(y + r * Math.sin(a)));
-  }
-  ctx.stroke();
-  ctx.strokeStyle = C.wall;
-  ctx.lineWidth = Math.max(2, 0.25 * unit);
-  ctx.lineCap = "square";
-  ctx.beginPath();
-  for (let q = 0; q < W; q++) {
-    const e = 4 * (k * W + q);
-    if (isNaN(A.walls[e])) continue;  // a wall away from the disks and the other walls
-    ctx.moveTo(X(A.walls[e]), Y(A.walls[e + 1]));
-    ctx.lineTo(X(A.walls[e + 2]), Y(A.walls[e + 3]));
-  }
-  ctx.stroke();
-  ctx.lineCap = "butt";
-  const cell = F.cell[k];
-  if (cell) {
-    ctx.strokeStyle = C.cell;
-    ctx.lineWidth = Math.max(1.5, 0.12 * unit);
-    ctx.setLineDash([6, 4]);
-    ctx.strokeRect(X(0), Y(cell[1]), cell[0] * s, cell[1] * s);
-    ctx.setLineDash([]);
-  }
-  ctx.fillStyle = "#1a1a1a";
-  ctx.font = `${Math.max(14, 0.45 * unit)}px sans-serif`;
-  ctx.textAlign = "center";
-  ctx.textBaseline = "top";
-  for (const [text, x, y] of F.labels[k]) {  // a name wider than its disks stays inside the picture
-    const half = ctx.measureText(text).width / 2;
-    ctx.fillText(text, Math.min(Math.max(X(x), half + 2), w - half - 2), Y(y));
-  }
+  drawPacking(ctx, {
+    width: w, height: h, bounds: D.frameBounds ? D.frameBounds[k] : D.bounds, meanRadius: D.meanRadius,
+    n: N, x: i => P[2 * (k * N + i)], y: i => P[2 * (k * N + i) + 1], radius: i => A.radius[base + i],
+    angle: i => A.angle[k * N + i], fill: i => diskColor(k, i), edge: C.edge,
+    forces: showForces && {count: c1 - c0, segment: c => S.subarray(4 * (c0 + c), 4 * (c0 + c) + 4),
+                           level: c => A.fclass[c0 + c], kind: c => A.kind[c0 + c], levels: 5, width: 0.4,
+                           kindColors: C.kinds.map(kind => kind[1])},
+    watched, watchedWidth: 0.3, spoke: C.spoke, wall: C.wall, walls: A.walls.subarray(4 * k * W, 4 * (k + 1) * W),
+    cell: F.cell[k], cellColor: C.cell, arrows: [], labels: F.labels[k]});
   canvas.dataset.frame = String(k);
 }
 
