@@ -35,7 +35,6 @@ GATHERED = NORMAL["linear"].code
 """The law the gathered contact pass is compiled for (:mod:`granlab.engine.kernels.gathered`)."""
 
 
-
 def _check_parts():
     for model in NORMAL.values():
         missing = [part for part in PARTS if not callable(getattr(MODELS[model.code], part, None))]
