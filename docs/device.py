@@ -2,7 +2,7 @@
 by disks and threads, what a rebuild of the contact table costs, and whether numba's CUDA target
 works there. One call, under four minutes on 16 cores; writes JSON.
 
-    python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick]
+    python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick] [--breakdown]
 
 On a machine without a registry (the lent GPU machines), install the checkout first with
 ``docs/device.sh``, which runs this too.
@@ -73,6 +73,44 @@ def thread_table(threads: list[int], sizes=SIZES) -> list[dict]:
     return rows
 
 
+def breakdown(side: int, threads: int, steps: int = 200) -> dict:
+    """Where a step of the reference system goes on ``threads`` threads: the whole step, its two parallel
+    regions (the contact pass over the table's rows, the pass over the disks that gathers the chunk
+    buffers, kicks and drifts) timed alone, what lies outside them, a rebuild of the table (serial) and
+    how many steps lie between two, and the bytes of chunk buffers the disks' pass reads and zeroes."""
+    import numba
+    import numpy as np
+
+    from granlab.engine import bench
+    from granlab.engine.kernels import contacts, integrate
+    from granlab.engine.kernels.integrate import INFO_REBUILDS
+
+    numba.set_num_threads(threads)
+    sim = bench.reference_system(side)
+    sim.run(20)
+    rebuilds = sim.workspace.info[INFO_REBUILDS]
+    start = time.perf_counter()
+    sim.run(steps)
+    step = (time.perf_counter() - start) / steps
+    rebuilds = int(sim.workspace.info[INFO_REBUILDS] - rebuilds)
+    p, w, cell, ct, ws = sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(), \
+        sim.workspace
+    run = sim.run_options(sim.dt, 1)
+    parallel = None if run.n_chunks == 1 else True
+    forces = contacts.CONTACT_FORCES[sim.tangential_model_code]
+    repeats = max(1, steps // 4)
+    contact = bench._best_seconds(lambda: forces(p, w, cell, ct, ws, sim._law_vector, run, False, parallel), repeats)
+    disks = bench._best_seconds(lambda: integrate.particle_pass(
+        p, ws.force_buffer, run.n_chunks, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
+        ws.partial_gather, ws.gather, parallel), repeats)
+    rebuild = bench.rebuild_seconds(sim, repeats=3)
+    n = sim.particles.count
+    return {"particles": n, "threads": threads, "chunks": int(run.n_chunks), "step_s": step,
+            "contact_pass_s": contact, "disk_pass_s": disks, "outside_s": step - contact - disks,
+            "rebuild_s": rebuild, "steps_between_rebuilds": steps / rebuilds if rebuilds else None,
+            "buffer_bytes_per_disk": 2 * ws.force_buffer.shape[0] * ws.force_buffer.shape[2] * 8}
+
+
 def cuda_probe() -> dict:
     """Whether numba's CUDA target compiles and runs a kernel with float64 atomics here, and what a
     launch costs. numba-cuda may still name ``numpy.row_stack`` (gone in numpy 2.5): aliased first."""
@@ -118,6 +156,7 @@ def main() -> None:
     parser.add_argument("--out", default="device.json")
     parser.add_argument("--threads", default="1,2,4,8,16")
     parser.add_argument("--quick", action="store_true", help="10⁴ and 10⁵ disks only (a check of the script)")
+    parser.add_argument("--breakdown", action="store_true", help="where a step goes, at each size and thread count")
     args = parser.parse_args()
     import numba
 
@@ -125,6 +164,9 @@ def main() -> None:
     began = time.perf_counter()
     result = {"processor": processor(), "numba": numba.__version__, "cuda": cuda_probe(),
               "table": thread_table(threads, SIZES[:2] if args.quick else SIZES)}
+    if args.breakdown:
+        result["breakdown"] = [breakdown(side, count) for side, _ in (SIZES[:2] if args.quick else SIZES)
+                               for count in threads]
     result["seconds"] = time.perf_counter() - began
     with open(args.out, "w") as out:
         json.dump(result, out, indent=1)
