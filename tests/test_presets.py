@@ -112,6 +112,14 @@ def test_loading_controls_wait_for_the_next_cycle_and_law_controls_act_at_once()
     assert preset.load.amplitude == 0.1
 
 
+def test_a_law_changed_is_marked_by_its_label_as_the_legends_name_it():
+    """The plots' markers say a law as its menu's legend does: "spring Cundall–Strack → α-corrected"."""
+    preset = make_preset("ratchet16")
+    preset.apply(tangential_model="alpha", normal_model="area")
+    assert [change["text"] for change in preset.changes[-2:]] == ["normal spring linear → overlap area",
+                                                                "spring Cundall–Strack → α-corrected"]
+
+
 def test_invalid_control_changes_nothing():
     preset = make_preset("ratchet16")
     before = preset.settings

@@ -15,7 +15,7 @@ import numpy as np
 
 from ...errors import ParameterError
 from ...observables import columns, coordination, sliding, solid_fraction
-from ...params import whole
+from ...params import NORMAL, TANGENTIAL, whole
 from ...simulation import Simulation, Snapshot, side_by_side
 from ...state import ParticleState
 from ..measures import pair_label
@@ -415,9 +415,11 @@ class Preset(ABC):
 
 
 def _value_text(value) -> str:
+    """A setting as the plots' change markers say it: a number to four digits, a law by its label."""
     if isinstance(value, float):
         return "∞" if value == math.inf else f"{value:.4g}"
-    return str(value)
+    laws = {**NORMAL, **TANGENTIAL}
+    return laws[value].label if isinstance(value, str) and value in laws else str(value)
 
 
 def as_number(value) -> float:
