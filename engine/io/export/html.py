@@ -23,10 +23,10 @@ from granlab.engine.analysis.ratchet import strain_fit
 from granlab.engine.frames import cell_outline, group_labels, meeting_walls
 from granlab.engine.io import h5md
 from granlab.engine.observables import coordination, solid_fraction
-from granlab.engine.params import NORMAL, TANGENTIAL
+from granlab.engine.params import TANGENTIAL
 from granlab.engine.protocols.presets import PRESETS
 from granlab.engine.protocols.measures import pair_codes
-from granlab.engine.protocols.presets.base import CONTROL_SYMBOLS
+from granlab.engine.protocols.presets.base import CONTROL_SYMBOLS, setting_text
 from granlab.engine.state import STATUS_SLIDE_NEG, STATUS_SLIDE_POS
 
 MAX_BYTES = 9_000_000
@@ -132,7 +132,7 @@ def write(frames, out: Path, stem: str, indices: list[int], run: dict) -> None:
 
 def _constants(params: dict) -> list[list[str]]:
     """The law's stiffnesses and the time step (the lab's settings leave them out: they do not change)."""
-    items = [[key, f"{name} = {_value_text(_number(params, f'contact.{key}'))}"]
+    items = [[key, f"{name} = {setting_text(_number(params, f'contact.{key}'))}"]
              for key, name in (("normal_stiffness", "K_n"), ("tangential_stiffness", "K_t"))
              if f"contact.{key}" in params]
     if "dt" in params:
@@ -204,15 +204,6 @@ def force_classes(force: np.ndarray) -> np.ndarray:
     return np.minimum((force * (FORCE_CLASSES / top)).astype(np.int64), FORCE_CLASSES - 1).astype(np.uint8)
 
 
-def _value_text(value) -> str:
-    if isinstance(value, str):
-        named = {**NORMAL, **TANGENTIAL}
-        return "∞" if value == "inf" else named[value].label if value in named else value
-    if isinstance(value, float):
-        return "∞" if value == math.inf else f"{value:.4g}"
-    return str(value)
-
-
 SETTING_WORDS = {"friction": "friction", "tangential_model": "tangential spring", "normal_model": "normal spring",
                  "damping_ratio": "damping",
                  "pressure": "pressure", "amplitude": "amplitude", "period": "period", "phase": "phase",
@@ -236,7 +227,7 @@ def _settings_text(values: dict, keys) -> list[list[str]]:
             continue
         if key in values:
             symbol = CONTROL_SYMBOLS.get(key, "")
-            value = _value_text(values[key]) + ("°" if key == "phase" else "")
+            value = setting_text(values[key]) + ("°" if key == "phase" else "")
             name = SETTING_WORDS.get(key, key)
             items.append([key, f"{name}: {value}" if key.endswith("_model") else
                           f"{name} {symbol} = {value}" if symbol else f"{name} = {value}"])

@@ -93,21 +93,24 @@ def energy(model, kn, overlap, ri, rj, is_wall):
 
 
 @njit(**JIT)
+def _rows(model, kn, overlap, ri, rj, is_wall, tangent):
+    out = np.empty(overlap.shape[0])
+    for k in range(overlap.shape[0]):
+        if tangent:
+            out[k] = stiffness(model, kn, overlap[k], ri[k], rj[k], is_wall[k])
+        else:
+            out[k] = force(model, kn, overlap[k], ri[k], rj[k], is_wall[k])
+    return out
+
+
 def forces(model, kn, overlap, ri, rj, is_wall):
     """:func:`force` of each row of the arrays ``overlap``, ``ri``, ``rj``, ``is_wall``."""
-    out = np.empty(overlap.shape[0])
-    for k in range(overlap.shape[0]):
-        out[k] = force(model, kn, overlap[k], ri[k], rj[k], is_wall[k])
-    return out
+    return _rows(model, kn, overlap, ri, rj, is_wall, False)
 
 
-@njit(**JIT)
 def stiffnesses(model, kn, overlap, ri, rj, is_wall):
     """:func:`stiffness` of each row, at overlaps ``>= 0``."""
-    out = np.empty(overlap.shape[0])
-    for k in range(overlap.shape[0]):
-        out[k] = stiffness(model, kn, overlap[k], ri[k], rj[k], is_wall[k])
-    return out
+    return _rows(model, kn, overlap, ri, rj, is_wall, True)
 
 
 def largest_stiffness(name: str, kn: float, radius: np.ndarray, max_overlap: float = 0.5) -> float:

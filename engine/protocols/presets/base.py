@@ -245,7 +245,7 @@ class Preset(ABC):
         """Drop the waiting changes; says which, for the user."""
         if not self.pending:
             return "no change was waiting"
-        text = ", ".join(f"{CONTROL_SYMBOLS.get(key, key)} = {_value_text(value)}" for key, value in self.pending.items())
+        text = ", ".join(f"{CONTROL_SYMBOLS.get(key, key)} = {setting_text(value)}" for key, value in self.pending.items())
         self.pending = {}
         return f"cancelled: {text} (the values in effect stay)"
 
@@ -256,7 +256,7 @@ class Preset(ABC):
             old, new = getattr(before, key), getattr(self.settings, key)
             if old != new:
                 self.changes.append({"t": self.sim.time, "cycle": self._clock_position(), "key": key,
-                                     "text": f"{symbol} {_value_text(old)} → {_value_text(new)}"})
+                                     "text": f"{symbol} {setting_text(old)} → {setting_text(new)}"})
         del self.changes[:-MAX_CHANGES]
 
     def _clock_position(self) -> float | None:
@@ -414,12 +414,17 @@ class Preset(ABC):
                 "sliding": int(sliding(table[0]).sum())}
 
 
-def _value_text(value) -> str:
-    """A setting as the plots' change markers say it: a number to four digits, a law by its label."""
+LAW_LABELS = {name: model.label for registry in (NORMAL, TANGENTIAL) for name, model in registry.items()}
+
+
+def setting_text(value) -> str:
+    """A setting as the plots' change markers and the handout say it: a number to four digits, ∞ (also
+    as JSON's ``"inf"``), a law by its label."""
     if isinstance(value, float):
         return "∞" if value == math.inf else f"{value:.4g}"
-    laws = {**NORMAL, **TANGENTIAL}
-    return laws[value].label if isinstance(value, str) and value in laws else str(value)
+    if value == "inf":
+        return "∞"
+    return LAW_LABELS.get(value, str(value)) if isinstance(value, str) else str(value)
 
 
 def as_number(value) -> float:
