@@ -304,7 +304,7 @@ class Dashboard:
         self.defaults.on_click(lambda e: self._command("defaults"))
         self.keyboard.param.watch(self._key, "action")
         for name, button in self.named_speeds.items():
-            button.on_click(lambda e, name=name: self._control("speed", self._speeds().get(name, 1.0)))
+            button.on_click(lambda e, name=name: self._press_speed(name))
         self.copy_link.js_on_click(args={"link": self.link_query}, code=COPY_LINK_JS)
         self.copy_link.on_click(lambda e: self._note("preset", "info", "link copied: this page's address with ?" +
                                                      urllib.parse.urlencode(json.loads(self.link_query.value))))
@@ -375,6 +375,18 @@ class Dashboard:
         """The named speeds of the preset shown (of the replayed run's preset in a replay)."""
         cls = PRESETS.get(self.preset_shown) or PRESETS.get((self.engine.status().get("replay") or {}).get("of"))
         return cls.speeds if cls else Preset.speeds
+
+    def _press_speed(self, name: str) -> None:
+        """A named speed asked for, and lit at once: the paced refresh would light it only after the page
+        has drawn the one before (a second or more on a busy machine)."""
+        speed = self._speeds().get(name, 1.0)
+        self._control("speed", speed)
+        self._light_speed(speed)
+
+    def _light_speed(self, speed: float) -> None:
+        speeds = self._speeds()
+        for name, button in self.named_speeds.items():
+            button.button_type = "primary" if speeds.get(name) == speed else "default"
 
     def _friction(self) -> None:
         self._friction_in_effect(not self.no_sliding.value)
@@ -723,12 +735,13 @@ class Dashboard:
             self.live.polite = escape(describe(status, self.scene.state()))
 
     def _show_speed_and_link(self, status: dict) -> None:
-        """The named speed in effect highlighted; the link's query kept for the Copy link button."""
+        """The named speed in effect (or the one this page asked for and the engine has yet to answer) highlighted;
+        the link's query kept for the Copy link button."""
         speed = status.get("speed") if status.get("replay") else (status.get("settings") or {}).get("speed")
         speed = math.inf if speed == "inf" else speed
-        speeds = self._speeds()
-        for name, button in self.named_speeds.items():
-            button.button_type = "primary" if speeds.get(name) == speed else "default"
+        if "speed" in self._asked and self._asked_for("speed", speed, status.get("pending") or {}):
+            speed = self._asked["speed"][0]
+        self._light_speed(speed)
         link = json.dumps({**(status.get("link") or {"preset": status.get("preset", "ratchet")}),
                            **({"profile": "projector"} if self.preferences.projector else {})})
         if self.link_query.value != link:
