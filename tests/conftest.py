@@ -60,4 +60,10 @@ def browser_type_launch_args(browser_type_launch_args):
 
 @pytest.fixture(scope="session")
 def browser_context_args(browser_context_args):
+    """Every page at 1366×768; what a test expects a page to show, waited for 15 s: this Chromium draws with
+    software WebGL on 2 cores, and a busy lab page's frames stop for up to 5.6 s after it loads (measured: 11–17
+    frames a second at the ratchet's speeds), so a 5 s wait fails a page that only drew late."""
+    from playwright.sync_api import expect
+
+    expect.set_options(timeout=15_000)
     return {**browser_context_args, "viewport": {"width": 1366, "height": 768}}  # the smaller projector screen
