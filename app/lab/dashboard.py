@@ -30,7 +30,8 @@ import panel as pn
 from granlab.engine.analysis import ANALYSES
 from granlab.engine.errors import ParameterError
 from granlab.engine.params import NORMAL_MODELS, TANGENTIAL_MODELS
-from granlab.engine.protocols.presets import FIELD_TYPES, PRESETS, Preset, parse_setup, setup_text
+from granlab.engine.protocols.presets import (FIELD_TYPES, PRESETS, Preset, parse_setup, query_text, setup_text,
+                                             speed_text as link_speed)
 from granlab.engine.protocols.settings import CONTROL_LABELS
 
 from . import analysis, lessons
@@ -304,7 +305,7 @@ class Dashboard:
         self.defaults.on_click(lambda e: self._command("defaults"))
         self.keyboard.param.watch(self._key, "action")
         for name, button in self.named_speeds.items():
-            button.on_click(lambda e, name=name: self._press_speed(name))
+            button.on_click(lambda e, name=name: self._control("speed", self._speeds().get(name, 1.0)))
         self.copy_link.js_on_click(args={"link": self.link_query}, code=COPY_LINK_JS)
         self.copy_link.on_click(lambda e: self._note("preset", "info", "link copied: this page's address with ?" +
                                                      urllib.parse.urlencode(json.loads(self.link_query.value))))
@@ -376,18 +377,6 @@ class Dashboard:
         cls = PRESETS.get(self.preset_shown) or PRESETS.get((self.engine.status().get("replay") or {}).get("of"))
         return cls.speeds if cls else Preset.speeds
 
-    def _press_speed(self, name: str) -> None:
-        """A named speed asked for, and lit at once: the paced refresh would light it only after the page
-        has drawn the one before (a second or more on a busy machine)."""
-        speed = self._speeds().get(name, 1.0)
-        self._control("speed", speed)
-        self._light_speed(speed)
-
-    def _light_speed(self, speed: float) -> None:
-        speeds = self._speeds()
-        for name, button in self.named_speeds.items():
-            button.button_type = "primary" if speeds.get(name) == speed else "default"
-
     def _friction(self) -> None:
         self._friction_in_effect(not self.no_sliding.value)
         self._control("friction", math.inf if self.no_sliding.value else float(self.friction.value))
@@ -397,6 +386,9 @@ class Dashboard:
             return
         self._asked[key] = (value, time.monotonic())
         self._command("apply", changes={key: value})
+        # at once, not at the paced refresh (a second or more after on a busy machine): a Copy link
+        # pressed next copies what was asked, and a named speed pressed lights
+        self._show_speed_and_link(self.engine.status())
 
     def _asked_for(self, key: str, in_effect, pending: dict) -> bool:
         """Whether this page asked for another value of ``key`` that the engine has yet to answer
@@ -735,15 +727,24 @@ class Dashboard:
             self.live.polite = escape(describe(status, self.scene.state()))
 
     def _show_speed_and_link(self, status: dict) -> None:
-        """The named speed in effect (or the one this page asked for and the engine has yet to answer) highlighted;
-        the link's query kept for the Copy link button."""
-        speed = status.get("speed") if status.get("replay") else (status.get("settings") or {}).get("speed")
+        """The named speed in effect highlighted and the link's query kept for the Copy link button, each
+        with what this page asked for and the engine has yet to answer."""
+        replay = status.get("replay")
+        settings = status.get("settings") or {}
+        pending = status.get("pending") or {}
+        link = dict(status.get("link") or {"preset": status.get("preset", "ratchet")})
+        speed = status.get("speed") if replay else settings.get("speed")
+        for key, (value, _) in list(self._asked.items()):
+            in_effect = speed if key == "speed" else settings.get(key)
+            if self._asked_for(key, math.inf if in_effect == "inf" else in_effect, pending):
+                named = key == "speed" and link.get("preset") in PRESETS
+                link[key] = link_speed(link["preset"], value) if named else query_text(value)
+                speed = value if key == "speed" else speed
         speed = math.inf if speed == "inf" else speed
-        if "speed" in self._asked and self._asked_for("speed", speed, status.get("pending") or {}):
-            speed = self._asked["speed"][0]
-        self._light_speed(speed)
-        link = json.dumps({**(status.get("link") or {"preset": status.get("preset", "ratchet")}),
-                           **({"profile": "projector"} if self.preferences.projector else {})})
+        speeds = self._speeds()
+        for name, button in self.named_speeds.items():
+            button.button_type = "primary" if speeds.get(name) == speed else "default"
+        link = json.dumps({**link, **({"profile": "projector"} if self.preferences.projector else {})})
         if self.link_query.value != link:
             self.link_query.value = link
 

@@ -55,13 +55,19 @@ def setup_query(name: str, settings: LabSettings) -> dict[str, str]:
     query = {"preset": name}
     for field, value in dataclasses.asdict(settings).items():
         if field != "speed" and value != getattr(own, field):
-            query[field] = _text(value)
-    named = [key for key, speed in PRESETS[name].speeds.items() if speed == settings.speed]
-    query["speed"] = named[0] if named else _text(settings.speed)
+            query[field] = query_text(value)
+    query["speed"] = speed_text(name, settings.speed)
     return query
 
 
-def _text(value) -> str:
+def speed_text(name: str, speed: float) -> str:
+    """A link's speed: one of preset ``name``'s named speeds by its name, another by its value."""
+    named = [key for key, value in PRESETS[name].speeds.items() if value == speed]
+    return named[0] if named else query_text(speed)
+
+
+def query_text(value) -> str:
+    """A setting's value as a link says it."""
     if isinstance(value, float):
         # repr: the shortest text that reads back exactly (less a whole number's ".0")
         return "inf" if value == math.inf else repr(value).removesuffix(".0")
