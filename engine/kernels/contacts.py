@@ -340,6 +340,50 @@ def gathered_row(ct, columns, c, q, k, radius, i, j, kr, tangential_model, store
             columns[c, C_TORQUE_J * BLOCK + q], (damping, sliding, rolling_loss, overlapping, max_overlap))
 
 
+Frame = namedtuple("Frame", "n length_x length_y strain_x strain_y dt whole_step store normal_model")
+"""What every row of a contact pass shares: the number of disks (a row's ``j`` at or past it is a wall),
+the periodic cell's lengths and affine strain rates, the step, whether the dashpots take the
+whole-step velocities, whether the results are kept (``store``) and the normal law's code."""
+
+
+@njit(**KERNEL, inline="always")
+def direct_row(p, w, ct, k, i, j, frame, laws, tangential_model, tallies, opening):
+    """Stages one and two of row ``k`` (disks or disk and wall ``i``, ``j``), as the contact loop
+    computes a row itself: its geometry, then its laws (a touching or a separated row) or its history
+    forgotten (a row out of reach). Returns ``(acts, is_wall, Geometry, F_x, F_y, torque on i, torque
+    on j, tallies, opening)``: a row that does not act adds no force. Shared by the contact loop and
+    the CUDA backend's (:mod:`granlab.engine.cuda`), which add the force each in its own way."""
+    is_wall = j >= frame.n
+    if is_wall:
+        near, g = wall_geometry(p, w, i, j - frame.n, laws.d0, ct.status[k])
+    else:
+        near, g = pair_geometry(p, ct.image, k, i, j, frame.length_x, frame.length_y, frame.strain_x,
+                                frame.strain_y, p.radius[i] + p.radius[j] + laws.d0, ct.status[k], frame.store)
+    if not near:
+        opening = far_row(ct, k, laws, g.gap, frame.store, opening)
+        return False, is_wall, g, 0.0, 0.0, 0.0, 0.0, tallies, opening
+    rates = dashpot_rates(p, i, j, is_wall, g, frame.strain_x, frame.strain_y, frame.whole_step)
+    eta = laws.eta_factor * ct.root_reduced_mass[k]
+    if g.gap < 0.0:
+        fn, ft, moment, tallies = touching_row(p, ct, k, i, j, g, is_wall, laws, tangential_model,
+                                               frame.normal_model, frame.dt, frame.whole_step, eta, rates, tallies)
+    else:
+        fn, acts, tallies, opening = separated_row(ct, k, laws, g.gap, rates.vn_d, eta, frame.dt, frame.whole_step,
+                                                   tallies, opening)
+        ft = 0.0
+        moment = 0.0
+        if not acts:
+            if frame.store:
+                ct.surface_gap[k] = g.gap
+            return False, is_wall, g, 0.0, 0.0, 0.0, 0.0, tallies, opening
+    store_row(ct, k, fn, ft, g.gap, frame.store)
+    ft_centre = tangential.centre_factor(tangential_model, g.alpha) * ft
+    fx = fn * g.nx + ft_centre * -g.ny
+    fy = fn * g.ny + ft_centre * g.nx
+    ri = p.radius[i]
+    return True, is_wall, g, fx, fy, -ri * ft + moment, -g.rj * ft - moment, tallies, opening
+
+
 @njit(**KERNEL)
 def dashpot_rates(p, i, j, is_wall, g, strain_x, strain_y, whole_step):
     """The row's :data:`Rates`: the relative velocities the springs take (half-step) and the ones the
@@ -406,7 +450,7 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     of tangential model ``tangential_model`` (a compile-time code), in four stages: a row's geometry
     (:func:`pair_geometry`, :func:`wall_geometry`), the laws of a touching row (:func:`touching_row`,
     or :func:`gathered_row` for a row the gathered pass computed; :func:`separated_row` for one that
-    does not overlap), its force added to the chunk's buffers (:func:`add_pair_force`,
+    does not overlap; the first two stages of a row are :func:`direct_row`), its force added to the chunk's buffers (:func:`add_pair_force`,
     :func:`add_wall_force`), and the chunk's tallies (:func:`write_tallies`). The stages that carry
     the laws are inlined at Numba's level (as :func:`granlab.engine.kernels.pair.touching_laws`); the
     others are left to LLVM, which inlines them: forced, the direct pass took 5 % longer a row.
@@ -434,6 +478,7 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
     virial = (0.0, 0.0, 0.0, 0.0)  # corrections: vxx, vxy, vyx, vyy
     columns = ws.row_columns
     gathered = run.gathered and run.normal_model == GATHERED
+    frame = Frame(n, length_x, length_y, strain_x, strain_y, dt, whole_step, store, run.normal_model)
     for k in range(lo, hi):
         q = (k - lo) % BLOCK
         if gathered and q == 0:
@@ -449,38 +494,15 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
             virial = add_pair_force(force_buffer, c, i, j, fx, fy, torque_i, torque_j, ct.image, k, length_x,
                                     length_y, virial)
             continue
-        is_wall = j >= n
-        if is_wall:
-            near, g = wall_geometry(p, w, i, j - n, laws.d0, ct.status[k])
-        else:
-            near, g = pair_geometry(p, ct.image, k, i, j, length_x, length_y, strain_x, strain_y,
-                                    p.radius[i] + p.radius[j] + laws.d0, ct.status[k], store)
-        if not near:
-            opening = far_row(ct, k, laws, g.gap, store, opening)
+        acts, is_wall, g, fx, fy, torque_i, torque_j, tallies, opening = direct_row(
+            p, w, ct, k, i, j, frame, laws, tangential_model, tallies, opening)
+        if not acts:
             continue
-        rates = dashpot_rates(p, i, j, is_wall, g, strain_x, strain_y, whole_step)
-        eta = laws.eta_factor * ct.root_reduced_mass[k]
-        if g.gap < 0.0:
-            fn, ft, moment, tallies = touching_row(p, ct, k, i, j, g, is_wall, laws, tangential_model,
-                                                   run.normal_model, dt, whole_step, eta, rates, tallies)
-        else:
-            fn, acts, tallies, opening = separated_row(ct, k, laws, g.gap, rates.vn_d, eta, dt, whole_step, tallies,
-                                                       opening)
-            ft = 0.0
-            moment = 0.0
-            if not acts:
-                if store:
-                    ct.surface_gap[k] = g.gap
-                continue
-        store_row(ct, k, fn, ft, g.gap, store)
-        ft_centre = tangential.centre_factor(tangential_model, g.alpha) * ft
-        fx = fn * g.nx + ft_centre * -g.ny
-        fy = fn * g.ny + ft_centre * g.nx
-        ri = p.radius[i]
         if is_wall:
-            wall_work, virial = add_wall_force(force_buffer, wall_buffer, c, i, j - n, fx, fy, -ri * ft + moment, g,
+            wall_work, virial = add_wall_force(force_buffer, wall_buffer, c, i, j - frame.n, fx, fy, torque_i, g,
                                                p.position[i, 0], p.position[i, 1], dt, wall_work, virial)
         else:
-            virial = add_pair_force(force_buffer, c, i, j, fx, fy, -ri * ft + moment, -g.rj * ft - moment, ct.image,
-                                    k, length_x, length_y, virial)
+            virial = add_pair_force(force_buffer, c, i, j, fx, fy, torque_i, torque_j, ct.image, k, length_x,
+                                    length_y, virial)
     write_tallies(ws.tally_buffer, c, tallies, wall_work, virial, opening)
+

@@ -39,6 +39,7 @@ from .neighbours import build_table, copy_table
 from .tangential import MODELS, model_key
 
 CODE_OK, CODE_OVERFLOW, CODE_LOST_CONTACT, CODE_NAN, CODE_OVERLAP, CODE_REBUILD, CODE_TUNNEL = range(7)
+CODE_GO_ON = -1
 
 # energy tallies accumulated over the run (work done on the disks is positive)
 (E_DAMPING, E_SLIDING, E_ROLLING, E_OPENING, E_WALL_WORK, E_CELL_WORK, E_PRESCRIBED_WORK,
@@ -369,9 +370,7 @@ def _needs_rebuild(w, cell, ws, skin):
 
 @njit(**KERNEL)
 def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks, drift, scale, parallel):
-    """Particle pass; on ``gather`` the cell gets the new virial and kinetic stress (keeping the
-    previous ones for the barostat), the tallies the work of loads, of prescribed motions and
-    of the cell's affine drift."""
+    """Particle pass, then, on ``gather``, :func:`pass_totals`."""
     if parallel is None:  # particle_pass's one chunk, a call less deep to compile
         particle_range(p, ws.force_buffer, 1, gravity, has_loads, gather, store, half, kicks, drift, scale[0],
                        scale[1], ws.reference, 0, p.position.shape[0], ws.gather)
@@ -379,16 +378,23 @@ def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks,
         particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                       scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather, parallel)
     if gather:
-        for a in range(2):
-            ws.lagged_kinetic[a] = cell.kinetic[a]
-            for b in range(2):
-                ws.lagged_virial[a, b] = cell.virial[a, b]
-                cell.virial[a, b] = ws.gather[G_VXX + 2 * a + b] + ws.virial_correction[a, b]
-            ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-        cell.kinetic[0] = ws.gather[G_KINETIC_X]
-        cell.kinetic[1] = ws.gather[G_KINETIC_Y]
-        ws.energy[E_PRESCRIBED_WORK] += ws.gather[G_PRESCRIBED]
-        ws.energy[E_EXTERNAL_WORK] += ws.gather[G_EXTERNAL]
+        pass_totals(cell, ws, scale)
+
+
+@njit(**KERNEL)
+def pass_totals(cell, ws, scale):
+    """After a pass that gathered the forces: the cell's new virial and kinetic stress (the previous
+    ones kept for the barostat), the work of loads, of prescribed motions and of the cell's affine drift."""
+    for a in range(2):
+        ws.lagged_kinetic[a] = cell.kinetic[a]
+        for b in range(2):
+            ws.lagged_virial[a, b] = cell.virial[a, b]
+            cell.virial[a, b] = ws.gather[G_VXX + 2 * a + b] + ws.virial_correction[a, b]
+        ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
+    cell.kinetic[0] = ws.gather[G_KINETIC_X]
+    cell.kinetic[1] = ws.gather[G_KINETIC_Y]
+    ws.energy[E_PRESCRIBED_WORK] += ws.gather[G_PRESCRIBED]
+    ws.energy[E_EXTERNAL_WORK] += ws.gather[G_EXTERNAL]
 
 
 @njit(**JIT, inline="always")
@@ -410,11 +416,9 @@ def advance(p, w, cell, ct, spare, ws, law, run, tangential_model, parallel):
         return 0, CODE_OK
     scale = ws.scale
     if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
-        _start(p, w, cell, ws, run, scale, parallel)
-        if ws.gather[G_BAD] > 0:
-            return 0, CODE_NAN
-        if _tunnels(ws, run.max_overlap):
-            return 0, CODE_TUNNEL
+        code = _start(p, w, cell, ws, run, scale, parallel)
+        if code != CODE_GO_ON:
+            return 0, code
     step = np.int64(0)
     while True:
         if ws.flags[FLAG_REBUILD]:
@@ -455,18 +459,56 @@ def _tunnels(ws, max_overlap):
 
 @njit(**KERNEL)
 def _start(p, w, cell, ws, run, scale, parallel):
-    """First half kick and drift of a call that starts on a whole step."""
+    """First half kick and drift of a call that starts on a whole step; returns :func:`start_end`'s code."""
     dt = run.dt
     half = 0.5 * dt
     kicks, no = np.int64(1), np.bool_(False)
-    walls_step(w, run.time_origin + run.step_offset * dt, half, kicks, dt)
+    start_boundaries(w, cell, ws, run.time_origin + run.step_offset * dt, half, dt, scale)
+    _pass(p, cell, ws, run.gravity, run.has_loads, run.n_chunks, no, no, half, kicks, dt, scale, parallel)
+    return start_end(w, cell, ws, run.skin, run.max_overlap)
+
+
+@njit(**KERNEL)
+def start_end(w, cell, ws, skin, max_overlap):
+    """After a call's first half kick and drift: its phase, a rebuild flagged if due, and the code the call
+    ends with at once (a divergence), or ``CODE_GO_ON``."""
+    ws.flags[FLAG_PHASE] = PHASE_DRIFTED
+    if _needs_rebuild(w, cell, ws, skin):
+        ws.flags[FLAG_REBUILD] = 1
+    if ws.gather[G_BAD] > 0:
+        return CODE_NAN
+    if _tunnels(ws, max_overlap):
+        return CODE_TUNNEL
+    return CODE_GO_ON
+
+
+@njit(**KERNEL)
+def start_boundaries(w, cell, ws, t, half, dt, scale):
+    """The first half kick and drift of the walls (their load at ``t``) and of the cell, in a call that
+    starts on a whole step; the work of the cell's affine drift."""
+    kicks = np.int64(1)
+    walls_step(w, t, half, kicks, dt)
     cell_step(cell, ws.lagged_virial, ws.lagged_kinetic, half, kicks, dt, scale)
     for a in range(2):
         ws.energy[E_CELL_WORK] -= (scale[a] - 1.0) * cell.virial[a, a]
-    _pass(p, cell, ws, run.gravity, run.has_loads, run.n_chunks, no, no, half, kicks, dt, scale, parallel)
-    ws.flags[FLAG_PHASE] = PHASE_DRIFTED
-    if _needs_rebuild(w, cell, ws, run.skin):
+
+
+@njit(**KERNEL)
+def step_end(w, cell, ws, last, skin, max_overlap):
+    """After a step's pass over the disks: the code it ends the call with (a divergence, the call's
+    last step, a rebuild due, which it flags), or ``CODE_GO_ON``."""
+    if ws.gather[G_BAD] > 0:
+        return CODE_NAN
+    if ws.info[INFO_OVERLAPPING] > 0:
+        return CODE_OVERLAP
+    if _tunnels(ws, max_overlap):
+        return CODE_TUNNEL
+    if last:
+        return CODE_OK
+    if _needs_rebuild(w, cell, ws, skin):
         ws.flags[FLAG_REBUILD] = 1
+        return CODE_REBUILD
+    return CODE_GO_ON
 
 
 @njit(**KERNEL)
@@ -496,14 +538,6 @@ def _steps(p, w, cell, ct, ws, law, run, step, scale, tangential_model, parallel
         else:  # every other step: the pass compiled for these flags as constants, its loop the leanest
             _pass(p, cell, ws, gravity, has_loads, n_chunks, True, False, half, 2, dt, scale, parallel)
         step += 1
-        if ws.gather[G_BAD] > 0:
-            return step, CODE_NAN
-        if ws.info[INFO_OVERLAPPING] > 0:
-            return step, CODE_OVERLAP
-        if _tunnels(ws, max_overlap):
-            return step, CODE_TUNNEL
-        if last:
-            return step, CODE_OK
-        if _needs_rebuild(w, cell, ws, skin):
-            ws.flags[FLAG_REBUILD] = 1
-            return step, CODE_REBUILD
+        code = step_end(w, cell, ws, last, skin, max_overlap)
+        if code != CODE_GO_ON:
+            return step, code
