@@ -1,6 +1,7 @@
 """Speed on a machine with many cores (and a GPU): the reference system's particle-steps per second
-by disks and threads, what a rebuild of the contact table costs, and whether numba's CUDA target
-works there. One call, under four minutes on 16 cores; writes JSON.
+by disks and threads, what a rebuild of the contact table costs, and, where numba finds a GPU, the
+CUDA backend: every law beside the CPU engine and its speed at 10⁴-10⁶ disks. One call, under four
+minutes on 16 cores; writes JSON.
 
     python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick] [--breakdown]
 
@@ -151,6 +152,40 @@ def cuda_probe() -> dict:
         return {"available": False, "error": f"{type(error).__name__}: {error}"}
 
 
+CUDA_SIZES = ((100, 2000), (316, 2000), (1000, 1000))
+"""Lattice sides and steps of the device's speed table (10⁴, 10⁵, 10⁶ disks)."""
+
+
+def cuda_table(quick: bool) -> dict:
+    """The CUDA backend: every law beside the CPU engine (tests/cuda_cases.py, on the GPU itself), the
+    reference system's check after 200 steps, and its particle-steps per second at each size."""
+    import subprocess
+    import sys
+
+    from granlab.engine import bench
+
+    result: dict = {"cases": [], "checks": [], "speed": []}
+    cases = subprocess.run([sys.executable, os.path.join(os.path.dirname(__file__), "..", "tests", "cuda_cases.py")],
+                           capture_output=True, text=True, timeout=300)
+    result["cases"] = [json.loads(line) for line in cases.stdout.splitlines() if line.startswith("{")]
+    if cases.returncode:
+        result["cases_error"] = cases.stderr[-2000:]
+    for model in ("cundall-strack", "lammps"):
+        try:
+            result["checks"].append(bench.device_check(200, side=32, model=model))
+        except Exception as error:  # each figure stands or fails alone
+            result["checks"].append({"model": model, "error": f"{type(error).__name__}: {error}"})
+    for side, steps in CUDA_SIZES[:2] if quick else CUDA_SIZES:
+        try:
+            row = bench.device(steps, side)
+        except Exception as error:
+            row = {"particles": side * side, "error": f"{type(error).__name__}: {error}"}
+        result["speed"].append(row)
+        print(f"{side * side:>8} disks on the device: {row.get('particle_steps_per_s', 0) / 1e6:8.1f} M particle-steps/s "
+              f"{row.get('error', '')}", flush=True)
+    return result
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="device.json")
@@ -162,8 +197,10 @@ def main() -> None:
 
     threads = [t for t in map(int, args.threads.split(",")) if t <= numba.config.NUMBA_NUM_THREADS]
     began = time.perf_counter()
-    result = {"processor": processor(), "numba": numba.__version__, "cuda": cuda_probe(),
-              "table": thread_table(threads, SIZES[:2] if args.quick else SIZES)}
+    result = {"processor": processor(), "numba": numba.__version__, "cuda": cuda_probe()}
+    if result["cuda"].get("available"):
+        result["cuda_backend"] = cuda_table(args.quick)
+    result["table"] = thread_table(threads, SIZES[:2] if args.quick else SIZES)
     if args.breakdown:
         result["breakdown"] = [breakdown(side, count) for side, _ in (SIZES[:2] if args.quick else SIZES)
                                for count in threads]

@@ -81,6 +81,31 @@ def run(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack"
     }
 
 
+def device(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
+    """Particle-steps per second of the reference system on the CUDA backend (its state copied to the device
+    and back once a checkpoint block, as every run on it: those copies are timed too)."""
+    sim = reference_system(side, model=model)
+    sim.use_backend("cuda")
+    sim.run(WARMUP_STEPS)  # the kernels compile at their first launch
+    start = time.perf_counter()
+    sim.run(steps)
+    elapsed = time.perf_counter() - start
+    n = sim.particles.count
+    return {"system": f"lammps_reference.in: {n} disks, periodic {side}x{side}, {model}, dt=0.001, CUDA backend",
+            "backend": "cuda", "particles": n, "steps": steps, "seconds": elapsed,
+            "particle_steps_per_s": n * steps / elapsed}
+
+
+def device_check(steps: int, side: int = 100, model: str = "cundall-strack") -> dict:
+    """The reference system after ``steps`` steps on the device beside the CPU engine
+    (:func:`granlab.engine.cuda.check.compare`)."""
+    from .cuda.check import compare
+
+    result = compare(lambda: reference_system(side, model=model), steps)
+    return {"system": f"lammps_reference.in: {side * side} disks, periodic {side}x{side}, {model}, dt=0.001",
+            "backend": "cuda", "check": result, "exit_status": int(not result["worst"] <= result["tolerance"])}
+
+
 SCALING_SIDES = (32, 100, 316, 1000)
 """Sides of the lattices of ``bench --scaling``: about 10³, 10⁴, 10⁵ and 10⁶ disks."""
 SCALING_STEPS = 1000

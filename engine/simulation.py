@@ -18,6 +18,8 @@ import numba
 import numpy as np
 
 from .checkpoint import CheckpointError, check_state
+from .cuda import check_backend
+from .cuda.stepper import DeviceRun
 from .errors import DivergenceError, ParameterError
 from .kernels import gathered as k_gathered, integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
@@ -293,6 +295,10 @@ class Simulation:
     (:mod:`granlab.engine.kernels.gathered`): the same results bit for bit, faster; ``False`` runs
     every row directly (the reference the tests and the bench compare with)."""
 
+    backend = "cpu"
+    """Where the steps run: ``"cpu"``, the numba kernels on :meth:`threads` threads, or ``"cuda"``, an NVIDIA
+    GPU (:mod:`granlab.engine.cuda`, the same laws): :meth:`use_backend`."""
+
     def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
                  cell: PeriodicCell | None = None, gravity=(0.0, 0.0), check_initial_overlap: bool = True):
@@ -456,6 +462,11 @@ class Simulation:
         p = self.particles
         return bool(p.external_force.any() or p.external_torque.any())
 
+    def use_backend(self, backend: str) -> None:
+        """Run the next steps on ``backend`` (:attr:`backend`); one this machine cannot run is refused, and
+        the message says what it can."""
+        self.backend = check_backend(backend)
+
     def run_options(self, dt: float, n_steps: int) -> RunOptions:
         """What the kernels take for ``n_steps`` steps of ``dt`` from the current state."""
         return RunOptions(self.normal_model_code, self.gravity, self._has_loads(), dt,
@@ -466,7 +477,8 @@ class Simulation:
         """One call of the kernel driver, growing the contact table until it fits."""
         while True:
             run = self.run_options(dt, n_steps)
-            advance = k_integrate.ADVANCE[self.tangential_model_code]
+            code = self.tangential_model_code
+            advance = k_integrate.ADVANCE[code] if self.backend == "cpu" else DeviceRun(code)
             done, code = advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
                                  self.contacts.arrays(), self._spare.arrays(), self.workspace, self._law_vector, run,
                                  None if run.n_chunks == 1 else True)

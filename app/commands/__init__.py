@@ -129,4 +129,4 @@ def _print_result(args, result) -> int:
         # at exit must not fail again
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
-    return 0
+    return result.get("exit_status", 0) if isinstance(result, dict) else 0

@@ -25,6 +25,15 @@ def _bench(args) -> dict:
     steps = args.steps or (bench.SCALING_STEPS if args.scaling else bench.TIMED_STEPS)
     if steps < 1 or not 2 <= args.side <= 1000:
         raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {steps} and {args.side}")
+    if args.check is not None and args.backend != "cuda":
+        raise GranLabError("--check compares a run on the device with the CPU engine: give --backend cuda too")
+    if args.backend == "cuda":
+        from granlab.engine.cuda import check_backend
+
+        check_backend("cuda")
+        if args.check is not None:
+            return bench.device_check(args.check, args.side, args.model)
+        return bench.device(steps, args.side, args.model)
     if args.scaling:
         return bench.scaling(steps=steps)
     if args.profile:
@@ -36,6 +45,20 @@ def _bench(args) -> dict:
 
 
 def _print_bench(result: dict) -> None:
+    if "check" in result:
+        check = result["check"]
+        worst = max(check["differences"], key=check["differences"].get)
+        print(result["system"])
+        print(f"  after {check['steps']} steps on the device and on the CPU: largest relative difference "
+              f"{check['worst']:.2e} ({worst}), allowed {check['tolerance']:.0e}: "
+              + ("agree" if result["exit_status"] == 0 else "DIFFER"))
+        if not check["same_contacts"]:
+            print("  the two contact tables differ (rows or status): their springs are not compared")
+        return
+    if result.get("backend") == "cuda":
+        print(result["system"])
+        print(f"  {result['particle_steps_per_s'] / 1e6:.2f} M particle-steps/s")
+        return
     if "contact_pass_ns_per_row" in result:
         step = result["ns_per_particle_step"]
         print(result["system"])
@@ -103,6 +126,11 @@ def add(commands) -> None:
                        help="where a particle-step goes on one thread: contact pass per row, pass over the disks, "
                             "the rest, a rebuild")
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
+    bench.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+                       help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
+    bench.add_argument("--check", type=positive_int, metavar="N",
+                       help="with --backend cuda: run N steps on the device and on the CPU and compare them; exit 1 "
+                            "when they differ by more than 1e-12 (relative)")
     bench.add_argument("--analysis", metavar="PACKING.h5",
                        help="time every analysis of 'granlab analyze' on this packing instead (prepared there by "
                             "method 1 if missing)")

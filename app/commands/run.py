@@ -16,7 +16,7 @@ from .options import number, positive_int
 
 def run_scene(name: str | None, out: str | None = None, frame_every: int | None = None,
               resume: str | None = None, force: bool = False, checkpoint_frames: int = 10,
-              checkpoint_seconds: float = 60.0, progress=None) -> dict:
+              checkpoint_seconds: float = 60.0, progress=None, backend: str = "cpu") -> dict:
     """Run a scene to its end (or continue a run file from its checkpoint); returns the final
     state, energy budget and recorded series.
 
@@ -27,10 +27,12 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     run writes its restored last good state as the last checkpoint. ``out`` is never the resumed
     file, and an existing ``out`` is written over only with ``force``. ``progress(done, total,
     sim)`` is called about four times a second of wall time (the steps run in slices that long;
-    a run split so continues bit for bit), not after the last slice: the result follows."""
+    a run split so continues bit for bit), not after the last slice: the result follows. ``backend``: where
+    the steps run (:attr:`granlab.engine.simulation.Simulation.backend`)."""
     import numba
 
     from granlab.engine.compilation import compile_sets, step_sets
+    from granlab.engine.cuda import check_backend
     from granlab.engine.io import h5md
     from granlab.engine.io.outputs import check_output
     from granlab.engine.io.scene import load_scene, parse_scene
@@ -38,6 +40,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     from granlab.engine.simulation import PARALLEL_MIN_DISKS
 
     positive("--checkpoint-seconds", checkpoint_seconds, allow_inf=True)
+    check_backend(backend)
     start = time.perf_counter()
     if resume is not None and out is None:
         out = str(Path(resume).with_name(Path(resume).stem + "-resumed.h5"))
@@ -60,6 +63,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
         compile_sets(step_sets([scene.law.tangential_model], threaded) + ["state", "packing"])
         sim = scene.build()
         total = scene.step_count(sim.dt)
+    sim.use_backend(backend)
     series = {"time": [], "kinetic": [], "stored": [], "dissipated": [], "balance": []}
     every = frame_every or scene.record_every or total or 1
     if out is not None:
@@ -180,7 +184,10 @@ def add(commands) -> None:
                      help="a checkpoint every K frames (default 10), so a killed run resumes from it")
     run.add_argument("--checkpoint-seconds", type=number, default=60.0, metavar="S",
                      help="... or once S seconds of wall time have passed since the last (default 60)")
+    run.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+                     help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force,
-                                                 a.checkpoint_every, a.checkpoint_seconds, _run_progress()),
+                                                 a.checkpoint_every, a.checkpoint_seconds, _run_progress(),
+                                                 a.backend),
                      printer=_print_run)

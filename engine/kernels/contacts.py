@@ -506,3 +506,45 @@ def contact_chunk(p, w, cell, ct, ws, law, run, tangential_model, store, c):
                                     length_y, virial)
     write_tallies(ws.tally_buffer, c, tallies, wall_work, virial, opening)
 
+
+def _single_row_for(tangential_model: int):
+    """:func:`direct_row` for one row alone, with tangential model ``tangential_model`` as a constant: its
+    force and tallies returned, not added (the CUDA backend adds them, a thread a row)."""
+
+    def single_row(p, w, cell, ct, law, k, dt, max_overlap, normal_model, store):
+        """Returns whether row ``k`` acts, whether on a wall, its disk ``i``, its disk or wall ``j``, its force
+        and torques on i and j, its push on a wall along the wall's normal, and its tallies (in the order of
+        the ``TALLY_*`` slots)."""
+        length_x = cell.length[0]
+        length_y = cell.length[1]
+        strain_x = cell.rate[0] / length_x if length_x > 0.0 else 0.0
+        strain_y = cell.rate[1] / length_y if length_y > 0.0 else 0.0
+        laws = chunk_laws(law, max_overlap)
+        whole_step = tangential.whole_step_dashpots(tangential_model) and (
+            laws.eta_factor > 0.0 or laws.gamma_t > 0.0 or laws.gamma_r_factor > 0.0)
+        n = uint64(p.position.shape[0])
+        frame = Frame(n, length_x, length_y, strain_x, strain_y, dt, whole_step, store, normal_model)
+        i = uint64(ct.particle_i[k])
+        j = uint64(ct.particle_j[k])
+        acts, is_wall, g, fx, fy, torque_i, torque_j, tallies, opening = direct_row(
+            p, w, ct, k, i, j, frame, laws, tangential_model, (0.0, 0.0, 0.0, 0, 0.0), 0.0)
+        damping, sliding, rolling_loss, overlapping, max_overlap = tallies
+        wall_work = vxx = vxy = vyx = vyy = 0.0
+        if acts and is_wall:
+            x = p.position[i, 0]
+            y = p.position[i, 1]
+            wall_work = (fx * g.wall_vx + fy * g.wall_vy) * dt
+            vxx, vxy, vyx, vyy = -fx * x, -fx * y, -fy * x, -fy * y
+        elif acts and (ct.image[k, 0] != 0 or ct.image[k, 1] != 0):
+            vxx, vxy, vyx, vyy = image_virial(fx, fy, ct.image[k, 0] * length_x, ct.image[k, 1] * length_y,
+                                              0.0, 0.0, 0.0, 0.0)
+        return (acts, is_wall, i, j - n if is_wall else j, fx, fy, torque_i, torque_j, fx * g.nx + fy * g.ny,
+                (damping, sliding, rolling_loss, wall_work, vxx, vxy, vyx, vyy, float(overlapping), max_overlap,
+                 opening))
+
+    single_row.__qualname__ = single_row.__name__ = f"single_row_{model_key(tangential_model)}"
+    return njit(**KERNEL)(for_model(single_row, tangential_model))
+
+
+SINGLE_ROW = {code: _single_row_for(code) for code in tangential.MODELS}
+"""One row alone by tangential model code (:func:`_single_row_for`)."""

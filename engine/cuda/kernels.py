@@ -1,0 +1,252 @@
+"""The device's kernels, one set per tangential model (its code a constant, as on the CPU).
+
+A step is four launches, none of which waits for the host:
+
+1. :func:`contacts`, one thread a row of the contact table: the row's geometry and laws
+   (:data:`granlab.engine.kernels.contacts.SINGLE_ROW`), its force added to the disks' sums with atomic
+   additions, its tallies summed within the block;
+2. ``after_contacts``, one block: the blocks' tallies summed, the walls' reactions and the energy
+   tallies (:func:`granlab.engine.kernels.integrate.contact_totals`), then the walls' and the cell's kick and
+   drift;
+3. ``disks``, one thread a disk: its forces gathered, its kicks and drift
+   (:func:`granlab.engine.kernels.integrate.particle_range`), the pass's sums within the block;
+4. ``after_disks``, one block: the blocks' sums, the cell's stress (:func:`~granlab.engine.kernels.integrate.
+   pass_totals`) and the checks that end a call (:func:`~granlab.engine.kernels.integrate.step_end`).
+
+A call's state (``RUN_STOP``, ``RUN_CODE``, ``RUN_STEP``) lives on the device: once a step ends the call
+(its last, a divergence, a rebuild due), the steps launched after it do nothing, so the host launches
+steps in batches and reads the state once a batch. Sums over blocks are taken in block order: a run
+on the device gives the same numbers each time it is run.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from numba import float64
+
+from . import numba_cuda, simulated
+from ..kernels.contacts import SINGLE_ROW, TALLY_MAX_OVERLAP, TALLY_SIZE
+from ..kernels.integrate import (CODE_GO_ON, FLAG_PHASE, G_DISPLACEMENT, G_MOVER, G_STEP_MOVE, GATHER_SIZE,
+                                 PHASE_ON_STEP, cell_step, contact_totals, particle_range, pass_totals,
+                                 start_boundaries, start_end, step_end, walls_step)
+from .layout import (C_HAS_LOADS, C_N_STEPS, C_NORMAL_MODEL, C_STEP_OFFSET, N_DT, N_MAX_OVERLAP, N_SKIN,
+                     N_TIME_ORIGIN, RUN_CODE, RUN_STEP, RUN_STOP, START, STEP, THREADS)
+
+cuda = numba_cuda()  # a global: the simulator finds the module in the kernels' globals and stands in for it
+
+
+def _simulator_fixes() -> None:
+    """Numba's simulator runs a Python thread for each of a block's threads. Its own thread polls them while it
+    holds the interpreter: handed over every 20 µs instead of 5 ms, a step takes a third of the time. And the
+    threads of a block that first reach a ``cuda.shared.array`` line each look for the block's array and, finding
+    none, may each make one (numba 0.68's ``FakeCUDAShared.array``): they then share nothing, and a block's sum
+    reads memory never written (a run diverged on it once in about ten). Made under a lock here, the array is
+    the block's one."""
+    import threading
+
+    import numpy as np
+    from numba.cuda.simulator import kernelapi
+    from numba.np import numpy_support
+
+    sys.setswitchinterval(min(sys.getswitchinterval(), 2e-5))
+    lock = threading.Lock()
+
+    def array(self, shape, dtype):
+        caller = sys._getframe(1)
+        where = (caller.f_code.co_filename, caller.f_lineno)  # the simulator's key: one array a line and block
+        with lock:
+            if where not in self._allocations:
+                self._allocations[where] = np.zeros(shape, numpy_support.as_dtype(dtype))
+            return self._allocations[where]
+
+    kernelapi.FakeCUDAShared.array = array
+
+
+if simulated():
+    _simulator_fixes()
+
+
+TALLIES, GATHER = 0, 1
+"""What a block sums: the contact pass's tallies (``TALLY_*``), or the disks' pass's sums (``G_*``)."""
+
+
+def build(model: int):
+    """The kernels of tangential model ``model``: ``(contacts, after_contacts, start, disks, after_disks)``."""
+    contact_row = SINGLE_ROW[model]
+
+    @cuda.jit(device=True)
+    def add_tallies(into, a, b):
+        for s in range(TALLY_SIZE):
+            if s == TALLY_MAX_OVERLAP:
+                into[s, a] = max(into[s, a], into[s, b])
+            else:
+                into[s, a] += into[s, b]
+
+    @cuda.jit(device=True)
+    def add_gather(into, a, b):
+        for s in range(G_STEP_MOVE):
+            if s == G_DISPLACEMENT:
+                into[s, a] = max(into[s, a], into[s, b])
+            else:
+                into[s, a] += into[s, b]
+        # the fastest disk, the first of equals (as the CPU's pass)
+        if into[G_STEP_MOVE, b] > into[G_STEP_MOVE, a] or (
+                into[G_STEP_MOVE, b] == into[G_STEP_MOVE, a] and into[G_MOVER, b] < into[G_MOVER, a]):
+            into[G_STEP_MOVE, a] = into[G_STEP_MOVE, b]
+            into[G_MOVER, a] = into[G_MOVER, b]
+
+    @cuda.jit(device=True)
+    def reduce_block(shared, tid, kind):
+        """Sum the block's columns of ``shared`` into column 0, in a fixed order."""
+        stride = THREADS // 2
+        while stride > 0:
+            cuda.syncthreads()
+            if tid < stride:
+                if kind == TALLIES:
+                    add_tallies(shared, tid, tid + stride)
+                else:
+                    add_gather(shared, tid, tid + stride)
+            stride //= 2
+        cuda.syncthreads()
+
+    @cuda.jit(device=True)
+    def sum_block(shared, tid, kind, width, blocks):
+        """The block's columns of ``shared`` summed (:func:`reduce_block`) into its row of ``blocks``."""
+        reduce_block(shared, tid, kind)
+        if tid == 0:
+            for s in range(width):
+                blocks[cuda.blockIdx.x, s] = shared[s, 0]
+
+    @cuda.jit(device=True)
+    def reduce_blocks(shared, blocks, count, width, tid, kind):
+        """Column 0 of ``shared`` = the sum of the ``count`` rows of ``blocks`` (each thread a stride of them,
+        in order, then :func:`reduce_block`)."""
+        for s in range(width):
+            shared[s, tid] = blocks[tid, s] if tid < count else 0.0
+        if kind == GATHER and tid >= count:
+            shared[G_MOVER, tid] = 1e300
+        b = tid + THREADS
+        while b < count:
+            for s in range(width):
+                value = blocks[b, s]
+                if kind == TALLIES:
+                    if s == TALLY_MAX_OVERLAP:
+                        shared[s, tid] = max(shared[s, tid], value)
+                    else:
+                        shared[s, tid] += value
+                elif s == G_DISPLACEMENT:
+                    shared[s, tid] = max(shared[s, tid], value)
+                elif s < G_STEP_MOVE:
+                    shared[s, tid] += value
+            if kind == GATHER and blocks[b, G_STEP_MOVE] > shared[G_STEP_MOVE, tid]:
+                shared[G_STEP_MOVE, tid] = blocks[b, G_STEP_MOVE]
+                shared[G_MOVER, tid] = blocks[b, G_MOVER]
+            b += THREADS
+        reduce_block(shared, tid, kind)
+
+    @cuda.jit
+    def contacts(p, w, cell, ct, ws, dev):
+        if dev.run[RUN_STOP] != 0:
+            return
+        k = cuda.grid(1)
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+        for s in range(TALLY_SIZE):
+            shared[s, tid] = 0.0
+        if k < ct.count[0]:
+            store = dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
+            acts, is_wall, i, j, fx, fy, torque_i, torque_j, push, tallies = contact_row(
+                p, w, cell, ct, dev.law, k, dev.numbers[N_DT], dev.numbers[N_MAX_OVERLAP], dev.counts[C_NORMAL_MODEL],
+                store)
+            if acts:
+                cuda.atomic.add(ws.force_buffer, (0, i, 0), fx)
+                cuda.atomic.add(ws.force_buffer, (0, i, 1), fy)
+                cuda.atomic.add(ws.force_buffer, (0, i, 2), torque_i)
+                if is_wall:
+                    cuda.atomic.add(ws.wall_buffer, (0, j), -push)
+                else:
+                    cuda.atomic.add(ws.force_buffer, (0, j, 0), -fx)
+                    cuda.atomic.add(ws.force_buffer, (0, j, 1), -fy)
+                    cuda.atomic.add(ws.force_buffer, (0, j, 2), torque_j)
+            for s in range(TALLY_SIZE):
+                shared[s, tid] = tallies[s]
+        sum_block(shared, tid, TALLIES, TALLY_SIZE, dev.block_tallies)
+
+    @cuda.jit
+    def after_contacts(w, cell, ws, dev, blocks):
+        if dev.run[RUN_STOP] != 0:
+            return
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+        reduce_blocks(shared, dev.block_tallies, blocks, TALLY_SIZE, tid, TALLIES)
+        if tid == 0:
+            for s in range(TALLY_SIZE):
+                ws.tally_buffer[0, s] = shared[s, 0]
+            contact_totals(w, ws, 1)
+            for m in range(ws.wall_buffer.shape[1]):
+                ws.wall_buffer[0, m] = 0.0
+            dt = dev.numbers[N_DT]
+            step = dev.run[RUN_STEP]
+            last = step + 1 == dev.counts[C_N_STEPS]
+            t = dev.numbers[N_TIME_ORIGIN] + (dev.counts[C_STEP_OFFSET] + step + 1) * dt
+            kicks = 1 if last else 2
+            drift = 0.0 if last else dt
+            walls_step(w, t, 0.5 * dt, kicks, drift)
+            cell_step(cell, cell.virial, cell.kinetic, 0.5 * dt, kicks, drift, ws.scale)
+
+    @cuda.jit
+    def start(w, cell, ws, dev):
+        dt = dev.numbers[N_DT]
+        start_boundaries(w, cell, ws, dev.numbers[N_TIME_ORIGIN] + dev.counts[C_STEP_OFFSET] * dt, 0.5 * dt, dt,
+                         ws.scale)
+
+    @cuda.jit
+    def disks(p, ws, dev, mode):
+        if dev.run[RUN_STOP] != 0:
+            return
+        i = cuda.grid(1)
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
+        out = cuda.local.array(GATHER_SIZE, float64)
+        for s in range(GATHER_SIZE):
+            out[s] = 0.0
+        out[G_MOVER] = 1e300
+        if i < p.position.shape[0]:
+            dt = dev.numbers[N_DT]
+            last = mode == STEP and dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
+            kicks = 1 if mode == START or last else 2
+            particle_range(p, ws.force_buffer, 1, dev.gravity, dev.counts[C_HAS_LOADS] != 0, mode == STEP, last,
+                           0.5 * dt, kicks, 0.0 if last else dt, ws.scale[0], ws.scale[1], ws.reference, i, i + 1,
+                           out)
+            out[G_MOVER] = i
+        for s in range(GATHER_SIZE):
+            shared[s, tid] = out[s]
+        sum_block(shared, tid, GATHER, GATHER_SIZE, dev.block_gather)
+
+    @cuda.jit
+    def after_disks(w, cell, ws, dev, blocks, mode):
+        if dev.run[RUN_STOP] != 0:
+            return
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
+        reduce_blocks(shared, dev.block_gather, blocks, GATHER_SIZE, tid, GATHER)
+        if tid != 0:
+            return
+        for s in range(GATHER_SIZE):
+            ws.gather[s] = shared[s, 0]
+        max_overlap = dev.numbers[N_MAX_OVERLAP]
+        if mode == START:
+            code = start_end(w, cell, ws, dev.numbers[N_SKIN], max_overlap)
+        else:
+            pass_totals(cell, ws, ws.scale)
+            last = dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
+            if last:
+                ws.flags[FLAG_PHASE] = PHASE_ON_STEP
+            dev.run[RUN_STEP] += 1
+            code = step_end(w, cell, ws, last, dev.numbers[N_SKIN], max_overlap)
+        if code != CODE_GO_ON:
+            dev.run[RUN_CODE] = code
+            dev.run[RUN_STOP] = 1
+
+    return contacts, after_contacts, start, disks, after_disks

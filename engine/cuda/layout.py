@@ -1,0 +1,22 @@
+"""What the device's kernels and the host agree on: block size, the call's state, the run's numbers."""
+
+from collections import namedtuple
+
+from . import simulated
+
+THREADS = 8 if simulated() else 128
+"""Threads a block (the simulator runs a Python thread for each: its blocks are small)."""
+
+RUN_STOP, RUN_CODE, RUN_STEP = range(3)
+RUN_SIZE = 3
+
+# the run's numbers (``Device.numbers``) and whole numbers (``Device.counts``)
+N_DT, N_TIME_ORIGIN, N_SKIN, N_MAX_OVERLAP = range(4)
+C_NORMAL_MODEL, C_HAS_LOADS, C_STEP_OFFSET, C_N_STEPS = range(4)
+
+START, STEP = 0, 1
+"""What a pass over the disks does: a call's first half kick and drift, or a step's."""
+
+Device = namedtuple("Device", "law gravity numbers counts run block_tallies block_gather")
+"""What the kernels read besides the state: the law's slots, gravity, the run's numbers and counts,
+the call's state (``RUN_*``) and the blocks' sums."""

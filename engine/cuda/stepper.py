@@ -1,0 +1,133 @@
+"""The host's side of a run on the device: a call of the step driver, as the CPU's.
+
+:class:`DeviceRun` is called as :data:`granlab.engine.kernels.integrate.ADVANCE` is, with the host's
+arrays: it copies the state to the device, launches the steps in batches (one read of the call's
+state a batch, none a step), and copies the state back when the call ends. The contact table is
+rebuilt on the host, by the CPU engine's :func:`~granlab.engine.kernels.integrate.rebuild`, with the
+state brought back for it and sent again after: the tables of the two backends are the same tables.
+A :class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import numba_cuda, simulated
+from .layout import RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device
+from ..kernels.contacts import TALLY_SIZE
+from ..kernels.integrate import (CODE_OK, CODE_REBUILD, FLAG_PHASE, FLAG_REBUILD, GATHER_SIZE, PHASE_ON_STEP,
+                                 rebuild)
+
+BATCH = 32
+"""Steps launched between two reads of the call's state."""
+
+_DEVICE_ONLY = ("force_buffer", "wall_buffer", "tally_buffer", "partial_gather", "row_columns")
+"""The workspace's buffers the device keeps in its own shapes (one chunk) and never sends back."""
+
+_KERNELS: dict[int, tuple] = {}
+
+
+def kernels(model: int) -> tuple:
+    """The kernels of tangential model ``model`` (built once a process; compiled at their first launch)."""
+    if model not in _KERNELS:
+        from .kernels import build  # numba.cuda takes 0.7 s to import: only for a run on the device
+
+        _KERNELS[model] = build(model)
+    return _KERNELS[model]
+
+
+def _to_device(array: np.ndarray):
+    """A copy of ``array`` on the device (the simulator's device is this memory: a copy of its own)."""
+    array = np.ascontiguousarray(array)
+    return array.copy() if simulated() else numba_cuda().to_device(array)
+
+
+def _to_host(device, host: np.ndarray) -> None:
+    host[...] = device if simulated() else device.copy_to_host()
+
+
+def _blocks(count: int) -> int:
+    return max(1, math.ceil(count / THREADS))
+
+
+class DeviceRun:
+    """Runs the steps of tangential model ``model`` on the device; called as the CPU's driver."""
+
+    def __init__(self, model: int):
+        self.model = model
+
+    def __call__(self, p, w, cell, ct, spare, ws, law, run, parallel=None) -> tuple[int, int]:
+        """Up to ``run.n_steps`` steps; returns ``(steps_done, code)``, the state back in the host's arrays."""
+        if run.n_steps == 0:
+            return 0, CODE_OK
+        contacts, after_contacts, start, disks, after_disks = kernels(self.model)
+        n = p.position.shape[0]
+        disk_blocks = _blocks(n)
+        dev = Device(law=_to_device(law), gravity=_to_device(np.asarray(run.gravity, np.float64)),
+                     numbers=_to_device(np.array([run.dt, run.time_origin, run.skin, run.max_overlap])),
+                     counts=_to_device(np.array([run.normal_model, run.has_loads, run.step_offset, run.n_steps],
+                                                np.int64)),
+                     run=_to_device(np.zeros(RUN_SIZE, np.int64)), block_tallies=_to_device(np.zeros((1, TALLY_SIZE))),
+                     block_gather=_to_device(np.zeros((disk_blocks, GATHER_SIZE))))
+        state = _State(p, w, cell, ct, ws)
+        if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
+            start[1, 1](state.w, state.cell, state.ws, dev)
+            disks[disk_blocks, THREADS](state.p, state.ws, dev, START)
+            after_disks[1, THREADS](state.w, state.cell, state.ws, dev, disk_blocks, START)
+            _, code, stopped = _read(dev)
+            if stopped:
+                state.download()
+                return 0, code
+        done = 0
+        while True:
+            flags = np.zeros_like(ws.flags)
+            _to_host(state.ws.flags, flags)
+            if flags[FLAG_REBUILD]:
+                state.download()
+                code = rebuild(p, w, cell, ct, spare, ws, law, run.skin)
+                if code != CODE_OK:
+                    return done, code
+                state = _State(p, w, cell, ct, ws)
+            row_blocks = _blocks(int(ct.count[0]))
+            if dev.block_tallies.shape[0] < row_blocks:
+                dev = dev._replace(block_tallies=_to_device(np.zeros((row_blocks, TALLY_SIZE))))
+            stopped = False
+            while not stopped:
+                for _ in range(min(BATCH, run.n_steps - done)):
+                    contacts[row_blocks, THREADS](state.p, state.w, state.cell, state.ct, state.ws, dev)
+                    after_contacts[1, THREADS](state.w, state.cell, state.ws, dev, row_blocks)
+                    disks[disk_blocks, THREADS](state.p, state.ws, dev, STEP)
+                    after_disks[1, THREADS](state.w, state.cell, state.ws, dev, disk_blocks, STEP)
+                done, code, stopped = _read(dev)
+            if code != CODE_REBUILD:
+                state.download()
+                return done, code
+            dev = dev._replace(run=_to_device(np.array([0, 0, done], np.int64)))  # RUN_STOP, RUN_CODE, RUN_STEP
+
+
+def _read(dev) -> tuple[int, int, bool]:
+    """The call's state: steps done, its code, whether it stopped."""
+    run = np.zeros(RUN_SIZE, np.int64)
+    _to_host(dev.run, run)
+    return int(run[RUN_STEP]), int(run[RUN_CODE]), bool(run[RUN_STOP])
+
+
+class _State:
+    """The state's arrays on the device (the host's named tuples, each array copied), and the way back."""
+
+    def __init__(self, p, w, cell, ct, ws):
+        self.host = (p, w, cell, ct, ws)
+        self.p, self.w, self.cell, self.ct = (type(t)(*(_to_device(a) for a in t)) for t in (p, w, cell, ct))
+        n, walls = p.position.shape[0], w.offset.shape[0]
+        mine = dict(force_buffer=np.zeros((1, n, 3)), wall_buffer=np.zeros((1, walls)),
+                    tally_buffer=np.zeros((1, TALLY_SIZE)), partial_gather=np.zeros((1, GATHER_SIZE)),
+                    row_columns=np.zeros((1, 1)))
+        self.ws = type(ws)(**{name: _to_device(mine.get(name, getattr(ws, name))) for name in ws._fields})
+
+    def download(self) -> None:
+        for device, host in zip((self.p, self.w, self.cell, self.ct, self.ws), self.host):
+            for name in host._fields:
+                if name not in _DEVICE_ONLY:
+                    _to_host(getattr(device, name), getattr(host, name))

@@ -1,0 +1,43 @@
+"""Run under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``) by tests/test_cuda.py: small runs of every
+law on the device beside the CPU engine; prints one JSON object a case."""
+
+import json
+
+import numpy as np
+
+from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from granlab.engine.cuda.check import compare
+from granlab.engine.generate import radii, random_gas
+from granlab.engine.params import TANGENTIAL
+from granlab.engine.protocols.prepare import biaxial_box
+
+STEPS = 30
+
+
+def loaded_box(tangential_model):
+    """16 disks pressed by two loaded walls, the overlap-area normal law, friction and rolling resistance:
+    the walls' load, their push and work, the contacts' history."""
+    sim = biaxial_box(16, seed=2, normal_model="area", tangential_model=tangential_model, dt_safety=0.3)
+    sim.run(400)
+    sim.set_law(friction=0.3, rolling_stiffness=20.0, rolling_friction=0.05)
+    return sim
+
+
+def cohesive_cell(tangential_model):
+    """24 disks in a periodic cell under stress control: cohesion, rolling resistance, images, the cell's kick."""
+    rng = np.random.default_rng(5)
+    r = radii(24, radius_min=0.4, radius_max=0.6, distribution="uniform", seed=5)
+    positions = random_gas(r, (0.0, 6.5, 0.0, 6.5), periodic=(True, True), seed=5)
+    law = ContactLaw(normal_stiffness=1e3, tangential_stiffness=500.0, friction=0.4, damping_ratio=0.2,
+                     tangential_model=tangential_model, rolling_stiffness=100.0, rolling_friction=0.05,
+                     cohesion_force=2.0, cohesion_range=0.05)
+    sim = Simulation(ParticleState(positions, r, velocity=rng.normal(0.0, 1.0, (24, 2)), omega=rng.normal(0.0, 1.0, 24)),
+                     law, Integration(dt_safety=0.1), cell=PeriodicCell((6.5, 6.5)))
+    sim.set_cell_stress(5.0)
+    return sim
+
+
+for case in (loaded_box, cohesive_cell):
+    for model in TANGENTIAL:
+        result = compare(lambda: case(model), STEPS)
+        print(json.dumps({"case": case.__name__, "model": model, **result}), flush=True)

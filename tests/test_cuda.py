@@ -1,0 +1,80 @@
+"""The CUDA backend (engine/cuda) on numba's simulator: every law on the device beside the CPU engine,
+the command line's --backend, and a machine without a GPU saying so."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from granlab.engine.errors import ParameterError
+from granlab.engine.params import TANGENTIAL
+
+from .conftest import periodic_gas
+
+HERE = Path(__file__).parent
+ROOT = HERE.parent
+SIMULATOR = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+
+
+def test_every_law_on_the_device_ends_where_the_cpu_engine_does():
+    """A box of 16 disks pressed by loaded walls (overlap-area normal law, friction, rolling resistance)
+    and 24 cohesive disks in a periodic cell under stress control with rolling resistance, each with the
+    four tangential models: after 30 steps the state (disks, walls, cell), the energy ledger and the
+    contacts' springs and forces differ from the CPU engine's by at most 1e-12 relative."""
+    done = subprocess.run([sys.executable, str(HERE / "cuda_cases.py")], env=SIMULATOR, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    cases = [json.loads(line) for line in done.stdout.splitlines()]
+    assert {(case["case"], case["model"]) for case in cases} == {
+        (name, model) for name in ("loaded_box", "cohesive_cell") for model in TANGENTIAL}
+    for case in cases:
+        assert case["same_contacts"] and case["contacts"] > 10, case
+        assert case["worst"] <= 1e-12, (case["case"], case["model"], case["differences"])
+
+
+def test_bench_check_compares_the_device_with_the_cpu_and_says_so():
+    done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "bench", "--backend", "cuda", "--check",
+                           "20", "--side", "6", "--model", "lammps"], env=SIMULATOR, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "after 20 steps on the device and on the CPU" in done.stdout and "agree" in done.stdout
+
+
+def test_granlab_run_takes_the_cuda_backend_and_ends_where_the_cpu_does(tmp_path):
+    """The block of quasi-rigidity Fig. 2 for 0.3 time units (105 steps): a run file written from the device's
+    state, the same disk and energies as on the CPU."""
+    scene = tmp_path / "block.toml"
+    scene.write_text((ROOT / "engine" / "io" / "scenes" / "block.toml").read_text().replace("duration = 20.0",
+                                                                                           "duration = 0.3"))
+    results = {}
+    for backend in ("cpu", "cuda"):
+        done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", str(scene), "--backend", backend,
+                               "--out", str(tmp_path / f"{backend}.h5"), "--json"], env=SIMULATOR,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        results[backend] = json.loads(done.stdout)
+    cpu, device = results["cpu"], results["cuda"]
+    assert device["steps"] == cpu["steps"] == 105
+    for key in ("positions", "velocities", "omegas"):
+        assert np.allclose(device[key], cpu[key], rtol=1e-12, atol=1e-15), key
+    assert device["energy"]["balance"] == pytest.approx(cpu["energy"]["balance"], rel=1e-12)
+    assert (tmp_path / "cuda.h5").stat().st_size > 0
+
+
+def test_without_a_gpu_the_cuda_backend_is_refused_in_one_line_naming_what_runs():
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
+        pytest.skip("the simulator stands in for a GPU")
+    sim = periodic_gas(count=20)
+    with pytest.raises(ParameterError, match=r"backend = 'cuda' is not allowed: cpu \(numba finds no CUDA GPU"):
+        sim.use_backend("cuda")
+    assert sim.backend == "cpu"
+    with pytest.raises(ParameterError, match="cpu or cuda"):
+        sim.use_backend("opencl")
+    done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", "--backend", "cuda"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "backend" in done.stderr and "no CUDA GPU" in done.stderr
