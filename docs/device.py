@@ -78,7 +78,8 @@ def breakdown(side: int, threads: int, steps: int = 200) -> dict:
     """Where a step of the reference system goes on ``threads`` threads: the whole step, its two parallel
     regions (the contact pass over the table's rows, the pass over the disks that gathers the chunk
     buffers, kicks and drifts) timed alone, what lies outside them, a rebuild of the table (serial) and
-    how many steps lie between two, and the bytes of chunk buffers the disks' pass reads and zeroes."""
+    how many steps lie between two, and the chunk buffers the disks' pass reads and zeroes a disk (their
+    bytes: each 24 read and 24 written)."""
     import numba
     import numpy as np
 
@@ -102,14 +103,16 @@ def breakdown(side: int, threads: int, steps: int = 200) -> dict:
     repeats = max(1, steps // 4)
     contact = bench._best_seconds(lambda: forces(p, w, cell, ct, ws, sim._law_vector, run, False, parallel), repeats)
     disks = bench._best_seconds(lambda: integrate.particle_pass(
-        p, ws.force_buffer, run.n_chunks, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
-        ws.partial_gather, ws.gather, parallel), repeats)
+        p, ws.force_buffer, ws.touched, run.n_chunks, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0,
+        ws.reference, ws.partial_gather, ws.gather, parallel), repeats)
     rebuild = bench.rebuild_seconds(sim, repeats=3)
     n = sim.particles.count
+    reach = ws.touched[:run.n_chunks].astype(np.int64)
+    buffers = float(np.maximum(reach[:, 1] - reach[:, 0] + 1, 0).sum()) / n  # each read and zeroed
     return {"particles": n, "threads": threads, "chunks": int(run.n_chunks), "step_s": step,
             "contact_pass_s": contact, "disk_pass_s": disks, "outside_s": step - contact - disks,
             "rebuild_s": rebuild, "steps_between_rebuilds": steps / rebuilds if rebuilds else None,
-            "buffer_bytes_per_disk": 2 * ws.force_buffer.shape[0] * ws.force_buffer.shape[2] * 8}
+            "buffers_per_disk": buffers, "buffer_bytes_per_disk": buffers * 2 * ws.force_buffer.shape[2] * 8}
 
 
 def cuda_probe() -> dict:

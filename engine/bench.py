@@ -206,7 +206,7 @@ def profile(side: int = 100, steps: int = 1000) -> dict:
         direct_pass = _best_seconds(lambda: contact_forces(p, w, cell, ct, ws, sim._law_vector, direct, False, None),
                                     repeats)
         particle_pass = _best_seconds(lambda: integrate.particle_pass(
-            p, ws.force_buffer, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
+            p, ws.force_buffer, ws.touched, 1, np.zeros(2), False, True, False, 0.0, 2, 0.0, 1.0, 1.0, ws.reference,
             ws.partial_gather, ws.gather, None), repeats)
         one_rebuild = rebuild_seconds(sim)
     finally:

@@ -348,7 +348,8 @@ class Simulation:
         flags = np.zeros(k_integrate.FLAG_SIZE, dtype=np.int64)
         flags[k_integrate.FLAG_REBUILD] = 1
         self.workspace = Workspace(
-            force_buffer=np.zeros((threads, n, 3)), wall_buffer=np.zeros((threads, nw)),
+            force_buffer=np.zeros((threads, n, 3)), touched=np.zeros((threads, 2), dtype=np.uint64),
+            wall_buffer=np.zeros((threads, nw)),
             tally_buffer=np.zeros((threads, TALLY_SIZE)), virial_correction=np.zeros((2, 2)),
             wrapped=np.zeros((n, 2)), wraps=np.zeros((n, 2), dtype=np.int64), reference=np.zeros((n, 2)),
             wall_reference=np.zeros(nw), length_reference=np.zeros(2), scale=np.ones(2),

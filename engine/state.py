@@ -64,8 +64,8 @@ contact loop gathers its common rows (:mod:`granlab.engine.kernels.gathered`).""
 
 Workspace = namedtuple(
     "Workspace",
-    "force_buffer wall_buffer tally_buffer virial_correction lagged_virial lagged_kinetic wrapped wraps reference "
-    "wall_reference length_reference scale gather partial_gather flags energy info row_columns",
+    "force_buffer touched wall_buffer tally_buffer virial_correction lagged_virial lagged_kinetic wrapped wraps "
+    "reference wall_reference length_reference scale gather partial_gather flags energy info row_columns",
 )
 
 

@@ -80,3 +80,40 @@ def test_table_grows_instead_of_dropping_contacts():
     assert sim.contacts.capacity >= sim.contacts.count
     expected = brute_force_pairs(sim.particles.position, np.full(side * side, 0.5), (side, side), (True, True), 2.6)
     assert table_pairs(sim) == expected
+
+
+def test_each_chunk_reads_its_force_buffer_only_between_the_disks_its_rows_touch():
+    """The pass over the disks reads and zeroes chunk c's buffer between ``touched[c]`` only: those are the
+    lowest and highest disk of its rows (brute force over the table), and after a contact pass its buffer
+    holds nothing outside them. 1200 disks of a dense gas in two chunks, with walls: their rows touch one disk."""
+    import numba
+
+    from granlab.engine.kernels.contacts import CONTACT_FORCES
+
+    numba.set_num_threads(2)
+    count = 1200
+    r = radii(count, radius_min=0.4, radius_max=0.6, distribution="uniform", seed=3)
+    positions = random_gas(r, (0.0, 40.0, 0.0, 40.0), periodic=(True, False), seed=3)
+    walls = (Wall((0.0, 1.0), 0.0, name="floor"), Wall((0.0, -1.0), -40.0, name="ceiling"))
+    sim = Simulation(ParticleState(positions, r, velocity=np.random.default_rng(3).normal(0.0, 1.0, (count, 2))),
+                     ContactLaw(normal_stiffness=1e3, tangential_stiffness=500.0, friction=0.3),
+                     Integration(dt_safety=0.1), walls=walls, cell=PeriodicCell((40.0, 40.0), periodic=(True, False)),
+                     gravity=(0.0, -1.0))
+    sim.run(300)
+    run = sim.run_options(sim.dt, 1)
+    assert run.n_chunks == 2
+    table, ws = sim.contacts, sim.workspace
+    rows = table.count
+    for c in range(2):
+        lo, hi = c * rows // 2, (c + 1) * rows // 2
+        i, j = table.particle_i[lo:hi], table.particle_j[lo:hi]
+        disks = np.concatenate([i, j[j < count]])
+        assert tuple(ws.touched[c]) == (disks.min(), disks.max())
+    assert (table.particle_j[:rows] >= count).any()  # wall rows among them
+    CONTACT_FORCES[sim.tangential_model_code](sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(),
+                                              table.arrays(), ws, sim._law_vector, run, False, True)
+    for c in range(2):
+        outside = np.ones(count, bool)
+        outside[int(ws.touched[c, 0]):int(ws.touched[c, 1]) + 1] = False
+        assert ws.force_buffer[c][outside].any(axis=1).sum() == 0
+        assert ws.force_buffer[c][~outside].any(axis=1).sum() > 0

@@ -216,7 +216,7 @@ def build(model: int):
             dt = dev.numbers[N_DT]
             last = mode == STEP and dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
             kicks = 1 if mode == START or last else 2
-            particle_range(p, ws.force_buffer, 1, dev.gravity, dev.counts[C_HAS_LOADS] != 0, mode == STEP, last,
+            particle_range(p, ws.force_buffer, ws.touched, 1, dev.gravity, dev.counts[C_HAS_LOADS] != 0, mode == STEP, last,
                            0.5 * dt, kicks, 0.0 if last else dt, ws.scale[0], ws.scale[1], ws.reference, i, i + 1,
                            out)
             out[G_MOVER] = i

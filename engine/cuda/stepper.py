@@ -23,7 +23,7 @@ from ..kernels.integrate import (CODE_OK, CODE_REBUILD, FLAG_PHASE, FLAG_REBUILD
 BATCH = 32
 """Steps launched between two reads of the call's state."""
 
-_DEVICE_ONLY = ("force_buffer", "wall_buffer", "tally_buffer", "partial_gather", "row_columns")
+_DEVICE_ONLY = ("force_buffer", "touched", "wall_buffer", "tally_buffer", "partial_gather", "row_columns")
 """The workspace's buffers the device keeps in its own shapes (one chunk) and never sends back."""
 
 _KERNELS: dict[int, tuple] = {}
@@ -121,7 +121,8 @@ class _State:
         self.host = (p, w, cell, ct, ws)
         self.p, self.w, self.cell, self.ct = (type(t)(*(_to_device(a) for a in t)) for t in (p, w, cell, ct))
         n, walls = p.position.shape[0], w.offset.shape[0]
-        mine = dict(force_buffer=np.zeros((1, n, 3)), wall_buffer=np.zeros((1, walls)),
+        mine = dict(force_buffer=np.zeros((1, n, 3)), touched=np.array([[0, max(n, 1) - 1]], np.uint64),
+                    wall_buffer=np.zeros((1, walls)),
                     tally_buffer=np.zeros((1, TALLY_SIZE)), partial_gather=np.zeros((1, GATHER_SIZE)),
                     row_columns=np.zeros((1, 1)))
         self.ws = type(ws)(**{name: _to_device(mine.get(name, getattr(ws, name))) for name in ws._fields})

@@ -157,7 +157,8 @@ def contact_forces(p, w, cell, ct, ws, law, run, store, tangential_model, parall
     (:class:`granlab.engine.state.RunOptions`) and tangential model ``tangential_model`` (a code).
 
     ``ws.force_buffer (T, N, 3)`` (force x, y and torque per chunk) must be zero on entry
-    (the particle pass zeroes it); ``ws.wall_buffer (T, nw)`` and ``ws.tally_buffer (T, TALLY_SIZE)``
+    (the particle pass zeroes it, each chunk's between the disks ``ws.touched`` says its rows touch:
+    :func:`granlab.engine.kernels.integrate.chunk_reach`); ``ws.wall_buffer (T, nw)`` and ``ws.tally_buffer (T, TALLY_SIZE)``
     are overwritten. The ``TALLY_V..`` slots get the virial corrections of wall and image rows.
     History (springs, anchors, status) is updated every call; the results ``normal_force``,
     ``tangential_force`` and ``surface_gap`` only when ``store`` (the last step of a run).

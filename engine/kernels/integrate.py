@@ -63,11 +63,12 @@ INFO_SIZE = 6
 
 
 @njit(**KERNEL)
-def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+def particle_pass(p, force_buffer, touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
                   scale_y, reference, partial, out, parallel):
     """One pass over the disks: gather forces, kick, drift.
 
-    - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque;
+    - ``gather``: sum the chunk buffers (zeroing them) into the contact force and torque, each
+      chunk's only for the disks its rows touched (``touched (T, 2)``: the lowest and highest);
       tally their virial ``sum F_i ⊗ x_i``; add gravity and, if ``has_loads``, the applied
       loads; tally, with the whole-step velocity ``v + half f/m``, the kinetic stress
       ``sum m v_a²`` and the work of prescribed motions and of loads over ``2 half``;
@@ -88,10 +89,10 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
     """
     n = p.position.shape[0]
     if parallel is None:
-        particle_range(p, force_buffer, 1, gravity, has_loads, gather, store, half, kicks, drift, scale_x, scale_y,
-                       reference, 0, n, out)
+        particle_range(p, force_buffer, touched, 1, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+                       scale_y, reference, 0, n, out)
         return
-    _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
+    _particle_ranges_parallel(p, force_buffer, touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                               scale_x, scale_y, reference, partial)
     for k in range(GATHER_SIZE):
         out[k] = 0.0
@@ -107,16 +108,16 @@ def particle_pass(p, force_buffer, n_chunks, gravity, has_loads, gather, store, 
 
 
 @njit(**PARALLEL)
-def _particle_ranges_parallel(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
+def _particle_ranges_parallel(p, force_buffer, touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                               scale_x, scale_y, reference, partial):
     n = p.position.shape[0]
     for c in prange(n_chunks):
-        particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+        particle_range(p, force_buffer, touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
                        scale_y, reference, c * n // n_chunks, (c + 1) * n // n_chunks, partial[c])
 
 
 @njit(**KERNEL)
-def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
+def particle_range(p, force_buffer, touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift, scale_x,
                    scale_y, reference, lo, hi, out):
     """:func:`particle_pass` for disks ``[lo, hi)``."""
     position = p.position
@@ -159,12 +160,13 @@ def particle_range(p, force_buffer, n_chunks, gravity, has_loads, gather, store,
             fy = 0.0
             tq = 0.0
             for c in range(n_chunks):
-                fx += force_buffer[c, i, 0]
-                fy += force_buffer[c, i, 1]
-                tq += force_buffer[c, i, 2]
-                force_buffer[c, i, 0] = 0.0
-                force_buffer[c, i, 1] = 0.0
-                force_buffer[c, i, 2] = 0.0
+                if touched[c, 0] <= i <= touched[c, 1]:  # a chunk's buffer is zero outside the disks its rows touch
+                    fx += force_buffer[c, i, 0]
+                    fy += force_buffer[c, i, 1]
+                    tq += force_buffer[c, i, 2]
+                    force_buffer[c, i, 0] = 0.0
+                    force_buffer[c, i, 1] = 0.0
+                    force_buffer[c, i, 2] = 0.0
             vxx += fx * x
             vxy += fx * y
             vyx += fy * x
@@ -372,10 +374,10 @@ def _needs_rebuild(w, cell, ws, skin):
 def _pass(p, cell, ws, gravity, has_loads, n_chunks, gather, store, half, kicks, drift, scale, parallel):
     """Particle pass, then, on ``gather``, :func:`pass_totals`."""
     if parallel is None:  # particle_pass's one chunk, a call less deep to compile
-        particle_range(p, ws.force_buffer, 1, gravity, has_loads, gather, store, half, kicks, drift, scale[0],
+        particle_range(p, ws.force_buffer, ws.touched, 1, gravity, has_loads, gather, store, half, kicks, drift, scale[0],
                        scale[1], ws.reference, 0, p.position.shape[0], ws.gather)
     else:
-        particle_pass(p, ws.force_buffer, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
+        particle_pass(p, ws.force_buffer, ws.touched, n_chunks, gravity, has_loads, gather, store, half, kicks, drift,
                       scale[0], scale[1], ws.reference, ws.partial_gather, ws.gather, parallel)
     if gather:
         pass_totals(cell, ws, scale)
@@ -425,9 +427,30 @@ def advance(p, w, cell, ct, spare, ws, law, run, tangential_model, parallel):
             code = rebuild(p, w, cell, ct, spare, ws, law, run.skin)
             if code != CODE_OK:
                 return step, code
+        chunk_reach(ct, p.position.shape[0], run.n_chunks, ws.touched)
         step, code = _steps(p, w, cell, ct, ws, law, run, step, scale, tangential_model, parallel)
         if code != CODE_REBUILD:
             return step, code
+
+
+@njit(**KERNEL)
+def chunk_reach(ct, n, n_chunks, touched):
+    """``touched[c]``: the lowest and highest disk the rows of chunk ``c`` of the contact table touch (a wall
+    is no disk), outside which its force buffer stays zero: the pass over the disks reads and zeroes each
+    chunk's buffer between the two only (on the reference system at 10⁵ disks, 2.1 buffers a disk
+    instead of one for each of 16 chunks). Rows change only at a rebuild: computed once a call and after
+    each rebuild, not in the contact pass (there, 2 ns a row)."""
+    count = ct.count[0]
+    for c in range(n_chunks):
+        first = uint64(n)
+        last = uint64(0)
+        for k in range(c * count // n_chunks, (c + 1) * count // n_chunks):
+            i = uint64(ct.particle_i[k])
+            j = uint64(ct.particle_j[k])
+            first = min(first, i)
+            last = max(last, i if j >= n else max(i, j))
+        touched[c, 0] = first
+        touched[c, 1] = last
 
 
 def _advance_for(tangential_model: int):
