@@ -26,6 +26,7 @@ import numpy as np
 from . import costs
 from .analysis.ratchet import (VERDICT_RULES, RatchetVerdict, deviatoric_strain, judge, ratchet_verdict,
                               share_statistics)
+from .cuda import check_backend
 from .errors import GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
@@ -48,7 +49,8 @@ class RatchetStudy:
     Sec. IV B 3. Run files get every cycle's record and a frame every ``frame_every`` cycles (and at
     the reference cycle); with ``watch_samples`` > 0, the (F_n, F_t, status) of every contact present
     when the loading starts, that many times per cycle (the Coulomb-cone paths of ratcheting Figs. 3,
-    4 and 6).
+    4 and 6). The cycles run on ``backend`` (:meth:`~granlab.engine.simulation.Simulation.use_backend`; the box is
+    prepared on the CPU).
     """
 
     particles: int = 16
@@ -67,6 +69,7 @@ class RatchetStudy:
     normal_model: str = "linear"
     frame_every: int = 10
     watch_samples: int = 0
+    backend: str = "cpu"
 
     def __post_init__(self):
         for name in ("particles", "samples", "cycles"):
@@ -95,6 +98,7 @@ class RatchetStudy:
         friction_coefficient("friction", self.friction)
         positive("amplitude", self.amplitude)
         nonnegative("gravity", self.gravity)
+        check_backend(self.backend)
         self.load()
 
 
@@ -137,9 +141,10 @@ class RatchetCurve:
 
 
 def model_sim(base, study: RatchetStudy, model: str):
-    """A copy of the prepared biaxial box ``base`` with tangential ``model``, the time step and the
-    gravity of ``study``, ready to cycle."""
+    """A copy of the prepared biaxial box ``base`` with tangential ``model``, the time step, the gravity and
+    the backend of ``study``, ready to cycle."""
     sim = base.clone(tangential_model=model)
+    sim.use_backend(study.backend)
     sim.set_dt(study.dt_factor * math.sqrt(float(sim.particles.mass.min()) / sim.law.normal_stiffness))
     if study.gravity:
         sim.set_gravity(0.0, -study.gravity)

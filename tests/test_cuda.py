@@ -65,6 +65,18 @@ def test_granlab_run_takes_the_cuda_backend_and_ends_where_the_cpu_does(tmp_path
     assert (tmp_path / "cuda.h5").stat().st_size > 0
 
 
+def test_a_ratchet_study_cycles_on_the_device():
+    """``granlab study ratchet --backend cuda``: the box prepared on the CPU, its cycles on the device (4 disks,
+    3 short cycles), the sample completed and the study's settings saying where it ran."""
+    done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "study", "ratchet", "--particles", "4",
+                           "--samples", "1", "--cycles", "3", "--period", "0.5", "--reference-cycle", "0",
+                           "--backend", "cuda", "--json"], env=SIMULATOR, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads(done.stdout)
+    assert result["settings"]["backend"] == "cuda"
+    assert result["models"]["cundall-strack"]["completed"] == 1 and result["failed"] == []
+
+
 def test_without_a_gpu_the_cuda_backend_is_refused_in_one_line_naming_what_runs():
     if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
         pytest.skip("the simulator stands in for a GPU")
@@ -74,7 +86,8 @@ def test_without_a_gpu_the_cuda_backend_is_refused_in_one_line_naming_what_runs(
     assert sim.backend == "cpu"
     with pytest.raises(ParameterError, match="cpu or cuda"):
         sim.use_backend("opencl")
-    done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "run", "--backend", "cuda"],
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
-    assert "backend" in done.stderr and "no CUDA GPU" in done.stderr
+    for command in (["run"], ["prepare", "--method", "compress"], ["study", "ratchet"]):
+        done = subprocess.run([sys.executable, "-m", "granlab.app.commands", *command, "--backend", "cuda"],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 2 and done.stderr.count("\n") == 1, (command, done.stderr)
+        assert "backend = 'cuda' is not allowed" in done.stderr and "no CUDA GPU" in done.stderr

@@ -15,11 +15,13 @@ def _prepare(args) -> dict:
 
     from granlab.engine.analysis.packing import packing_stats
     from granlab.engine.compilation import compile_sets, step_sets
+    from granlab.engine.cuda import check_backend
     from granlab.engine.io.h5md import RunWriter
     from granlab.engine.io.outputs import check_output
     from granlab.engine.protocols import prepare
     from granlab.engine.simulation import PARALLEL_MIN_DISKS
 
+    check_backend(args.backend)
     if args.out:
         check_output(args.out, force=args.force)
     costs.check_memory(args.particles, "--particles")
@@ -30,14 +32,14 @@ def _prepare(args) -> dict:
     if args.method == "compress":
         prepared = prepare.compress(args.particles, seed=args.seed, pressure=args.pressure,
                                     friction=0.2 if args.mu is None else args.mu, max_time=args.max_time or 400.0,
-                                    progress=progress_line)
+                                    progress=progress_line, backend=args.backend)
     else:
         law = prepare.gilabert_law(friction=0.15 if args.mu is None else args.mu, kappa=args.kappa,
                                    cohesion=args.method == "2" or args.cohesive, rolling=args.rolling,
                                    pressure=args.pressure, rolling_damping_ratio=args.rolling_damping)
         args.dt_safety = GILABERT_DT_SAFETY if args.dt_safety is None else args.dt_safety  # the run file keeps it
         common = dict(count=args.particles, solid_fraction=args.solid_fraction, pressure=args.pressure, law=law,
-                      seed=args.seed, progress=progress_line, dt_safety=args.dt_safety)
+                      seed=args.seed, progress=progress_line, dt_safety=args.dt_safety, backend=args.backend)
         if args.method == "1":
             prepared = prepare.method1(max_time=args.max_time or 2000.0, **common)
         else:
@@ -90,6 +92,8 @@ def add(commands) -> None:
     prepare.add_argument("--dt-safety", type=number, metavar="F",
                          help=f"methods 1 and 2: the time step as a fraction F of the stability bound, in (0, 1] "
                               f"(default {GILABERT_DT_SAFETY}; 0.3 until 27 Nov 2026)")
+    prepare.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+                         help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     prepare.add_argument("--out", help="write the packing to a run file")
     prepare.add_argument("--force", action="store_true", help="write over an existing --out file")
     prepare.add_argument("--json", action="store_true", help="print one JSON object")

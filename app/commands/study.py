@@ -25,7 +25,8 @@ def _study(args) -> dict:
                              amplitude=amplitude, period=args.period,
                              phase=None if args.phase is None else math.radians(args.phase), zero_mean=args.zero_mean,
                              friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
-                             gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch)
+                             gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch,
+                             backend=args.backend)
         out = str(Path(args.out) / f"amplitude-{amplitude:g}") if sweep and args.out else args.out
         result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=out,
                                    progress=None if args.json else TextProgress(), force=args.force)
@@ -119,6 +120,8 @@ def add(commands) -> None:
     ratchet.add_argument("--watch", type=int, default=0, metavar="K",
                          help="record every contact's (F_n, F_t, status) K times per cycle in the run files")
     ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
+    ratchet.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+                         help="where the cycles run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
     ratchet.add_argument("--force", action="store_true", help="write over run files already in --out")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")

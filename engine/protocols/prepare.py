@@ -114,15 +114,17 @@ def hold_load(sim: Simulation, pressure: float) -> None:
 
 def compress(count: int = 16, seed: int = 0, pressure: float = 1.0, friction: float = 0.2,
              max_time: float = 400.0, ramp: float = COMPRESSION_RAMP,
-             progress: Callable[[str], None] | None = None, **box_options) -> Prepared:
+             progress: Callable[[str], None] | None = None, backend: str = "cpu", **box_options) -> Prepared:
     """Ratcheting Sec. IV B 1: compress the biaxial box frictionless to ``pressure``, then switch
     friction on.
 
     The load rises to ``pressure`` over ``ramp`` (:data:`COMPRESSION_RAMP`; 0: at once), then
     holds until Gilabert's equilibrium criteria hold (F1 = P a) or for at most ``max_time``.
-    ``progress(line)``, if given, gets a line on the state about once a second of wall clock."""
+    ``progress(line)``, if given, gets a line on the state about once a second of wall clock; the steps run
+    on ``backend`` (:meth:`~granlab.engine.simulation.Simulation.use_backend`)."""
     start = time.perf_counter()
     sim = biaxial_box(count, seed, pressure, **box_options)
+    sim.use_backend(backend)
     ramp = nonnegative("ramp", ramp)
     reporter = None if progress is None else Progress(progress, pressure, "compressing")
     stages = {}
@@ -204,11 +206,12 @@ def cell_mass(radii, length: float, diameter: float = 1.0, disks: int | None = N
 def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.01, law: ContactLaw | None = None,
             seed: int = 0, diameter: float = 1.0, max_time: float = 2000.0, cell_mass_disks: int | None = None,
             dt_safety: float = GILABERT_DT_SAFETY, cell_mass_reading: str = "mass",
-            progress: Callable[[str], None] | None = None) -> Prepared:
+            progress: Callable[[str], None] | None = None, backend: str = "cpu") -> Prepared:
     """Gilabert Sec. III A: a granular gas at ``solid_fraction`` in a periodic cell, at rest, brought
     to equilibrium under the isotropic ``pressure`` by stress control of the cell (Eq. 3), whose
     generalized mass is that of a sample of ``cell_mass_disks`` disks by ``cell_mass_reading``
-    (:func:`cell_mass`). ``progress(line)``, if given, gets a line on the state about once a second."""
+    (:func:`cell_mass`). ``progress(line)``, if given, gets a line on the state about once a second; the
+    steps run on ``backend``."""
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
     r, positions, length = gilabert_gas(count, solid_fraction, seed, diameter)
@@ -216,6 +219,7 @@ def method1(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
                         mass=cell_mass(r, length, diameter, cell_mass_disks, cell_mass_reading))
     sim = Simulation(ParticleState(positions, r, density=4.0 / math.pi / diameter ** 2), law,
                      Integration(dt_safety=dt_safety), cell=cell)
+    sim.use_backend(backend)
     reporter = None if progress is None else Progress(progress, pressure, "compressing")
     relaxation = relax(sim, pressure, max_time, progress=reporter)
     return Prepared(sim, relaxation.report, relaxation.sim_time, time.perf_counter() - start, "1", pressure)
@@ -229,7 +233,7 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
             cell_mass_disks: int | None = None, dt_safety: float = GILABERT_DT_SAFETY,
             cell_mass_reading: str = "mass",
             on_stage: Callable[[str, Simulation], None] | None = None,
-            progress: Callable[[str], None] | None = None) -> Prepared:
+            progress: Callable[[str], None] | None = None, backend: str = "cpu") -> Prepared:
     """Gilabert Sec. III B, for cohesive laws.
 
     1. A gas at ``solid_fraction`` with Maxwellian velocities of mean quadratic velocity ``speed``
@@ -246,7 +250,7 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     (:func:`cell_mass`).
     ``on_stage(name, sim)`` is called at the end of each stage (``aggregation``, ``relaxation``:
     the packing at ``P* = 0`` of Gilabert Table IV, ``compression``); ``progress(line)``, if given,
-    gets a line on the state about once a second.
+    gets a line on the state about once a second. The steps run on ``backend``.
     """
     start = time.perf_counter()
     law = law or gilabert_law(pressure=pressure, diameter=diameter)
@@ -265,6 +269,7 @@ def method2(count: int = 200, solid_fraction: float = 0.36, pressure: float = 0.
     cell = PeriodicCell((length, length), control=("fixed", "fixed"),
                         mass=cell_mass(r, length, diameter, cell_mass_disks, cell_mass_reading))
     sim = Simulation(particles, first_law, Integration(dt_safety=dt_safety), cell=cell)
+    sim.use_backend(backend)
     sim_time = 0.0
     # stage 1: aggregation at fixed size, until one cluster in equilibrium
     check = max(sim.dt, 1.0)
