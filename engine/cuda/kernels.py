@@ -146,9 +146,12 @@ def build(model: int):
         reduce_block(shared, tid, kind)
 
     @cuda.jit
-    def contacts(p, w, cell, ct, ws, dev):
+    def contacts(p, w, cell, ct, sums, dev):
+        # sums: the workspace's force and wall buffers alone, so that the kernel's parameters stay under the
+        # 4 KB a launch takes before CUDA 12.1 (the whole workspace with them: 4.4 KB)
         if dev.run[RUN_STOP] != 0:
             return
+        force_buffer, wall_buffer = sums
         k = cuda.grid(1)
         tid = cuda.threadIdx.x
         shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
@@ -160,15 +163,15 @@ def build(model: int):
                 p, w, cell, ct, dev.law, k, dev.numbers[N_DT], dev.numbers[N_MAX_OVERLAP], dev.counts[C_NORMAL_MODEL],
                 store)
             if acts:
-                cuda.atomic.add(ws.force_buffer, (0, i, 0), fx)
-                cuda.atomic.add(ws.force_buffer, (0, i, 1), fy)
-                cuda.atomic.add(ws.force_buffer, (0, i, 2), torque_i)
+                cuda.atomic.add(force_buffer, (0, i, 0), fx)
+                cuda.atomic.add(force_buffer, (0, i, 1), fy)
+                cuda.atomic.add(force_buffer, (0, i, 2), torque_i)
                 if is_wall:
-                    cuda.atomic.add(ws.wall_buffer, (0, j), -push)
+                    cuda.atomic.add(wall_buffer, (0, j), -push)
                 else:
-                    cuda.atomic.add(ws.force_buffer, (0, j, 0), -fx)
-                    cuda.atomic.add(ws.force_buffer, (0, j, 1), -fy)
-                    cuda.atomic.add(ws.force_buffer, (0, j, 2), torque_j)
+                    cuda.atomic.add(force_buffer, (0, j, 0), -fx)
+                    cuda.atomic.add(force_buffer, (0, j, 1), -fy)
+                    cuda.atomic.add(force_buffer, (0, j, 2), torque_j)
             for s in range(TALLY_SIZE):
                 shared[s, tid] = tallies[s]
         sum_block(shared, tid, TALLIES, TALLY_SIZE, dev.block_tallies)

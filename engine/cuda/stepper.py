@@ -93,10 +93,11 @@ class DeviceRun:
             row_blocks = _blocks(int(ct.count[0]))
             if dev.block_tallies.shape[0] < row_blocks:
                 dev = dev._replace(block_tallies=_to_device(np.zeros((row_blocks, TALLY_SIZE))))
+            sums = (state.ws.force_buffer, state.ws.wall_buffer)
             stopped = False
             while not stopped:
                 for _ in range(min(BATCH, run.n_steps - done)):
-                    contacts[row_blocks, THREADS](state.p, state.w, state.cell, state.ct, state.ws, dev)
+                    contacts[row_blocks, THREADS](state.p, state.w, state.cell, state.ct, sums, dev)
                     after_contacts[1, THREADS](state.w, state.cell, state.ws, dev, row_blocks)
                     disks[disk_blocks, THREADS](state.p, state.ws, dev, STEP)
                     after_disks[1, THREADS](state.w, state.cell, state.ws, dev, disk_blocks, STEP)
