@@ -341,6 +341,9 @@ class Wall(_Replaceable):
     - ``mode="force"``: ``mass d²position/dt² = load(t) * length + force from the disks``,
       where ``length`` is the distance between the two walls named in
       ``load_per_length_of`` (the biaxial box of ratcheting Eq. 1) or 1 if it is ``None``.
+
+    ``disks = (first, stop)``: only disks ``first`` to ``stop - 1`` meet the wall (boxes side by side in one
+    simulation, :mod:`granlab.engine.batch`); ``None``: every disk.
     """
 
     normal: tuple[float, float] = (0.0, 1.0)
@@ -352,6 +355,7 @@ class Wall(_Replaceable):
     load: Load = Load()
     load_per_length_of: tuple[str, str] | None = None
     name: str = ""
+    disks: tuple[int, int] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -370,6 +374,11 @@ class Wall(_Replaceable):
             set_(self, "mass", nonnegative(f"wall {self.name!r} mass", self.mass))
         if not isinstance(self.load, Load):
             raise ParameterError(f"wall {self.name!r} load", self.load, "a Load")
+        if self.disks is not None:
+            first, stop = pair(f"wall {self.name!r} disks", self.disks, whole)
+            if not first < stop:
+                raise ParameterError(f"wall {self.name!r} disks", self.disks, "(first, stop) with first < stop")
+            set_(self, "disks", (first, stop))
 
 
 def box_walls(x0: float, x1: float, y0: float, y1: float, loads: dict[str, Load] | None = None,

@@ -328,7 +328,7 @@ class Simulation:
         self.cell_params = cell
         self.wall_params = tuple(walls)
         self._check_geometry(walls, cell)
-        self.walls = WallState(tuple(walls))
+        self.walls = WallState(tuple(walls), particles.count)
         if check_initial_overlap:
             self._check_disks_inside_walls()
         self.cell = CellState(cell, float(particles.mass.sum()))
@@ -396,12 +396,13 @@ class Simulation:
     def _check_disks_inside_walls(self):
         """The walls' part of :meth:`_check_initial_overlap`, before any table is made: a large
         system placed outside its box is refused in a moment, not after its set-up."""
-        radius = self.particles.radius
         for w in range(self.walls.count):
-            ratio = (self.walls.offset[w] + radius - self.particles.position @ self.walls.normal[w]) / radius
+            first, stop = self.walls.reach[w]
+            radius = self.particles.radius[first:stop]
+            ratio = (self.walls.offset[w] + radius - self.particles.position[first:stop] @ self.walls.normal[w]) / radius
             k = int(np.argmax(ratio))
             if ratio[k] > self.integration.initial_overlap:
-                raise self._overlap_error(k, f"wall {self.walls.names[w]!r}", ratio[k])
+                raise self._overlap_error(first + k, f"wall {self.walls.names[w]!r}", ratio[k])
 
     def _overlap_error(self, i: int, other: str, ratio: float) -> ParameterError:
         return ParameterError(f"initial overlap of disk {i} and {other} / smaller radius", round(float(ratio), 6),
@@ -552,7 +553,8 @@ class Simulation:
                 offset[:, axis] -= lengths[axis] * np.round(offset[:, axis] / lengths[axis])
             gaps = np.hypot(offset[:, 0], offset[:, 1]) - p.radius - p.radius[disk]
             gaps[disk] = np.inf
-            wall_gaps = self.walls.normal @ p.position[disk] - self.walls.offset - p.radius[disk]
+            met = (self.walls.reach[:, 0] <= disk) & (disk < self.walls.reach[:, 1])
+            wall_gaps = self.walls.normal[met] @ p.position[disk] - self.walls.offset[met] - p.radius[disk]
             if min(gaps.min(), wall_gaps.min(initial=np.inf)) <= reach:
                 return False
         return True

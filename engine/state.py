@@ -40,7 +40,7 @@ ParticleArrays = namedtuple(
 )
 WallArrays = namedtuple(
     "WallArrays",
-    "normal offset velocity tangential_velocity tangential_position mode inv_mass load length_ref particle_force",
+    "normal offset velocity tangential_velocity tangential_position mode inv_mass load length_ref particle_force reach",
 )
 CellArrays = namedtuple(
     "CellArrays",
@@ -217,10 +217,11 @@ class WallState(_Copyable):
     the distance the wall surface has slid along ``t = z × n``; ``load (nw, 4)`` holds
     (base, amplitude, angular frequency, phase); ``length_ref (nw, 2)`` the indices of the
     two walls whose distance multiplies the load (-1: none); ``particle_force`` the normal
-    force the disks exerted on each wall in the last step (negative when pushed outward).
+    force the disks exerted on each wall in the last step (negative when pushed outward);
+    ``reach (nw, 2)`` the disks ``first`` to ``stop - 1`` that meet each wall (every disk but in a batch).
     """
 
-    def __init__(self, walls: tuple[Wall, ...]):
+    def __init__(self, walls: tuple[Wall, ...], n: int):
         self.names = [w.name or f"wall{k}" for k, w in enumerate(walls)]
         if len(set(self.names)) != len(self.names):
             raise ParameterError("wall names", self.names, "distinct names")
@@ -247,6 +248,11 @@ class WallState(_Copyable):
                     raise ParameterError(f"wall {self.names[k]!r} load_per_length_of", wall.load_per_length_of,
                                          "two walls facing each other (opposite normals)")
         self.particle_force = np.zeros(nw)
+        self.reach = np.array([w.disks or (0, n) for w in walls], dtype=np.int64).reshape(nw, 2)
+        for k, (first, stop) in enumerate(self.reach):
+            if stop > n:
+                raise ParameterError(f"wall {self.names[k]!r} disks", (int(first), int(stop)),
+                                     f"a range of the {n} disks: stop at most {n}")
 
     @property
     def count(self) -> int:
@@ -255,7 +261,7 @@ class WallState(_Copyable):
     def arrays(self) -> WallArrays:
         return WallArrays(self.normal, self.offset, self.velocity, self.tangential_velocity,
                           self.tangential_position, self.mode, self.inv_mass, self.load, self.length_ref,
-                          self.particle_force)
+                          self.particle_force, self.reach)
 
 
 class CellState(_Copyable):

@@ -335,7 +335,7 @@ def rebuild(p, w, cell, ct, spare, ws, law, skin):
     """Rebuild the contact table into ``spare``, then commit it to ``ct``. Returns a code."""
     periodic = (cell.control[0] != CELL_NONE, cell.control[1] != CELL_NONE)
     needed, lost = build_table(p.position, p.radius, p.inv_mass, cell.length, periodic, w.normal, w.offset,
-                               law[D0] + skin, ct, spare, ws.wrapped, ws.wraps)
+                               w.reach, law[D0] + skin, ct, spare, ws.wrapped, ws.wraps)
     if needed > spare.particle_i.shape[0]:
         ws.info[INFO_NEEDED] = needed
         return CODE_OVERFLOW

@@ -1,7 +1,7 @@
 """Neighbour search: a cell list with a Verlet skin, periodic images, and history transfer.
 
 :func:`build_table` fills a fresh contact table with every pair (i < j, any periodic
-image) and every disk-wall pair closer than the interaction range plus ``extra``
+image) and every disk-wall pair (of a wall's reach) closer than the interaction range plus ``extra``
 (the cohesion range D0 plus the skin), copies the history of pairs that were
 already in the old table, and reports whether any interacting contact was lost.
 It never writes past the capacity: it returns the number of rows it needs.
@@ -90,12 +90,13 @@ def _cell_lists(wrapped, origin, cells, width):
 
 
 @njit(**JIT)
-def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_offset, extra,
+def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_offset, wall_reach, extra,
                 old, new, wrapped, wraps):
     """Build the candidate-pair table ``new`` and carry over the history of ``old``.
 
     Arguments: ``position (N, 2)``, ``radius (N,)``, ``inv_mass (N,)``, cell ``length (2,)``, ``periodic``
-    (two booleans), ``wall_normal (nw, 2)``, ``wall_offset (nw,)``, ``extra`` (D0 + skin),
+    (two booleans), ``wall_normal (nw, 2)``, ``wall_offset (nw,)``, ``wall_reach (nw, 2)`` (the disks
+    ``first`` to ``stop - 1`` a wall meets), ``extra`` (D0 + skin),
     ``old``/``new`` contact tables (``ContactArrays``), scratch ``wrapped (N, 2)`` and
     ``wraps (N, 2)`` filled with the wrapped positions and image counts.
 
@@ -135,6 +136,8 @@ def build_table(position, radius, inv_mass, length, periodic, wall_normal, wall_
                                 new.root_reduced_mass[count] = root_reduced_mass(inv_mass[i], inv_mass[j])
                             count += 1
         for w in range(wall_offset.shape[0]):
+            if not wall_reach[w, 0] <= i < wall_reach[w, 1]:
+                continue
             gap = wall_normal[w, 0] * wrapped[i, 0] + wall_normal[w, 1] * wrapped[i, 1] - wall_offset[w] - radius[i]
             if gap < extra:
                 if count < capacity:

@@ -73,15 +73,21 @@ def apply_load(sim: Simulation, load: CyclicLoad, start: float | None = None) ->
         if name not in sim.walls.names:
             raise ParameterError("walls", sim.walls.names, "a biaxial box with walls named right and top")
     start = sim.time if start is None else start
+    for name, wall_load in wall_loads(load, start).items():
+        sim.set_wall_load(name, wall_load)
+    return start
+
+
+def wall_loads(load: CyclicLoad, start: float) -> dict[str, Load]:
+    """The loads of the box's top and right walls for ``load`` started at time ``start``."""
     omega = 2.0 * math.pi / load.period
     origin = -omega * start
     base = load.pressure - load.offset
-    sim.set_wall_load("top", Load(base=base, amplitude=load.amplitude, period=load.period, phase=origin))
     x_amplitude = 0.0 if load.phase is None else load.amplitude
     x_phase = origin + (0.0 if load.phase is None else load.phase)
     x_base = load.pressure if load.phase is None else base
-    sim.set_wall_load("right", Load(base=x_base, amplitude=x_amplitude, period=load.period, phase=x_phase))
-    return start
+    return {"top": Load(base=base, amplitude=load.amplitude, period=load.period, phase=origin),
+            "right": Load(base=x_base, amplitude=x_amplitude, period=load.period, phase=x_phase)}
 
 
 def steps_per_cycle(sim: Simulation, load: CyclicLoad) -> int:
