@@ -1,6 +1,7 @@
 """Speed on a machine with many cores (and a GPU): the reference system's particle-steps per second
-by disks and threads, what a rebuild of the contact table costs, and, where numba finds a GPU, the
-CUDA backend: every law beside the CPU engine and its speed at 10⁴-10⁶ disks. One call, under four
+by disks and threads, what a rebuild of the contact table costs, a ratchet study of 100 samples side by
+side in one batch against its samples one by one, and, where numba finds a GPU, the CUDA backend: every
+law beside the CPU engine, its speed at 10⁴-10⁶ disks and the batched study on it. One call, under four
 minutes on 16 cores; writes JSON.
 
     python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick] [--breakdown]
@@ -178,6 +179,10 @@ def cuda_table(quick: bool) -> dict:
             result["checks"].append(bench.device_check(200, side=32, model=model))
         except Exception as error:  # each figure stands or fails alone
             result["checks"].append({"model": model, "error": f"{type(error).__name__}: {error}"})
+    try:
+        result["batch"] = bench.batch_study(100, "cuda", alone_samples=3)
+    except Exception as error:
+        result["batch"] = {"error": f"{type(error).__name__}: {error}"}
     for side, steps in CUDA_SIZES[:2] if quick else CUDA_SIZES:
         try:
             row = bench.device(steps, side)
@@ -204,6 +209,9 @@ def main() -> None:
     if result["cuda"].get("available"):
         result["cuda_backend"] = cuda_table(args.quick)
     result["table"] = thread_table(threads, SIZES[:2] if args.quick else SIZES)
+    from granlab.engine import bench
+
+    result["batch_cpu"] = bench.batch_study(100, "cpu")
     if args.breakdown:
         result["breakdown"] = [breakdown(side, count) for side, _ in (SIZES[:2] if args.quick else SIZES)
                                for count in threads]

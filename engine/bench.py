@@ -106,6 +106,55 @@ def device_check(steps: int, side: int = 100, model: str = "cundall-strack") -> 
             "backend": "cuda", "check": result, "exit_status": int(not result["worst"] <= result["tolerance"])}
 
 
+BATCH_CYCLES = 3
+"""Cycles of ``bench --batch``: the ratchet study's default period, about 3300 steps a cycle."""
+
+
+def batch_study(samples: int = 100, backend: str = "cpu", alone_samples: int = 10, rounds: int = 3) -> dict:
+    """A ratchet study's cycles (16 disks a sample, the study's defaults) two ways, alternated ``rounds``
+    times, medians: ``samples`` prepared boxes side by side in one :class:`~granlab.engine.batch.Batch` on
+    ``backend``, and ``alone_samples`` of them cycled one after another on one thread, each its own
+    simulation on ``backend`` (as one Dask worker runs them). The preparation, the same for both, is left
+    out; each time is for :data:`BATCH_CYCLES` cycles, and the ratio is per sample."""
+    from .analysis.report import analysis_threads
+    from .batch import Batch
+    from .protocols.cyclic import run_cycles
+    from .protocols.prepare import compress
+    from .studies import RatchetStudy, _cycle_batch, model_sim
+
+    study = RatchetStudy(particles=16, samples=samples, cycles=BATCH_CYCLES, backend=backend)
+    boxes = [model_sim(compress(16, seed=seed, pressure=1.0, friction=study.friction).sim, study, "cundall-strack")
+             for seed in range(samples)]
+    alone = boxes[:alone_samples]
+
+    def batched() -> float:
+        start = time.perf_counter()
+        _cycle_batch(Batch([box.clone() for box in boxes]), study, "cundall-strack", None)
+        return time.perf_counter() - start
+
+    def one_by_one() -> float:
+        copies = [box.clone() for box in alone]
+        start = time.perf_counter()
+        with analysis_threads(1):
+            for copy in copies:
+                run_cycles(copy, study.load(), study.cycles)
+        return time.perf_counter() - start
+
+    batched(), one_by_one()  # compile, warm the caches
+    batch_times, alone_times = [], []
+    for _ in range(rounds):
+        batch_times.append(batched())
+        alone_times.append(one_by_one())
+    batch_s, alone_s = float(np.median(batch_times)), float(np.median(alone_times))
+    threads = numba.get_num_threads() if backend == "cpu" else None
+    return {"system": f"ratchet study: {samples} samples of 16 disks, {BATCH_CYCLES} cycles of period "
+                      f"{study.period:g}, Cundall-Strack, {backend}" + (f", {threads} threads" if threads else ""),
+            "backend": backend, "samples": samples, "cycles": BATCH_CYCLES, "batch_s": batch_s,
+            "alone_samples": len(alone), "alone_s": alone_s, "alone_per_sample_s": alone_s / len(alone),
+            "batch_per_sample_s": batch_s / samples, "speedup_per_sample": alone_s / len(alone) / (batch_s / samples),
+            "batch_times_s": batch_times, "alone_times_s": alone_times}
+
+
 SCALING_SIDES = (32, 100, 316, 1000)
 """Sides of the lattices of ``bench --scaling``: about 10³, 10⁴, 10⁵ and 10⁶ disks."""
 SCALING_STEPS = 1000

@@ -26,13 +26,14 @@ import numpy as np
 from . import costs
 from .analysis.ratchet import (VERDICT_RULES, RatchetVerdict, deviatoric_strain, judge, ratchet_verdict,
                               share_statistics)
+from .batch import Batch
 from .cuda import check_backend
-from .errors import GranLabError, ParameterError
+from .errors import DivergenceError, GranLabError, ParameterError
 from .io.h5md import RunWriter
 from .io.outputs import check_output, staged
 from .observables import columns, touching
 from .params import STUDY_LIMITS, TANGENTIAL_MODELS, finite, friction_coefficient, nonnegative, positive, whole
-from .protocols.cyclic import CyclicLoad, run_cycles
+from .protocols.cyclic import CyclicLoad, run_cycles, wall_loads
 from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
 
@@ -50,7 +51,7 @@ class RatchetStudy:
     the reference cycle); with ``watch_samples`` > 0, the (F_n, F_t, status) of every contact present
     when the loading starts, that many times per cycle (the Coulomb-cone paths of ratcheting Figs. 3,
     4 and 6). The cycles run on ``backend`` (:meth:`~granlab.engine.simulation.Simulation.use_backend`; the box is
-    prepared on the CPU).
+    prepared on the CPU); ``batched``: every sample side by side in one simulation (:func:`ratchet_batch`).
     """
 
     particles: int = 16
@@ -70,6 +71,7 @@ class RatchetStudy:
     frame_every: int = 10
     watch_samples: int = 0
     backend: str = "cpu"
+    batched: bool = False
 
     def __post_init__(self):
         for name in ("particles", "samples", "cycles"):
@@ -168,10 +170,15 @@ def cycle_sample(sim, study: RatchetStudy, writer: RunWriter | None = None) -> R
                         on_sample=writer.write_contact_sample if writer is not None else None)
     if writer is not None:
         writer.write_checkpoint(sim)
-    cycles, lx, ly = series.arrays()
+    return ratchet_curve(study, sim.law.tangential_model, *series.arrays())
+
+
+def ratchet_curve(study: RatchetStudy, model: str, cycles, lx, ly) -> RatchetCurve:
+    """The strain from the reference cycle on (ratcheting Eq. 32) and its verdict, from the box lengths at the
+    start of each cycle."""
     ref = study.reference_cycle
     gamma = deviatoric_strain(lx[ref:], ly[ref:], lx[ref], ly[ref])
-    return RatchetCurve(sim.law.tangential_model, cycles, lx, ly, ref, gamma, ratchet_verdict(cycles[ref:], gamma))
+    return RatchetCurve(model, cycles, lx, ly, ref, gamma, ratchet_verdict(cycles[ref:], gamma))
 
 
 def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrite: bool = False) -> list[dict]:
@@ -199,18 +206,74 @@ def ratchet_sample(study: RatchetStudy, seed: int, out_dir: str | None, overwrit
                             "study": "ratchet", "seed": seed, "model": model, **study.__dict__}) as writer:
                     curve = cycle_sample(sim, study, writer)
                 run_file = str(run_file)
-            verdict = curve.verdict
-            results.append({"seed": seed, "model": model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
-                            "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,
-                            "outlier_cycles": verdict.outlier_cycles,
-                            "dgamma_without_outliers": verdict.dgamma_without_outliers,
-                            "ratcheting_without_outliers": verdict.ratcheting_without_outliers,
-                            "equilibrated": prepared.equilibrated, "length_x": curve.length_x.tolist(),
-                            "length_y": curve.length_y.tolist(),
-                            "run_file": run_file, "wall_time_s": time.perf_counter() - start, "error": None})
+            results.append(_result(seed, curve, prepared.equilibrated, run_file, time.perf_counter() - start))
         except Exception as error:  # reported per sample: the others go on
             results.append(_failure(study, seed, model, error))
     return results
+
+
+def _result(seed: int, curve: RatchetCurve, equilibrated: bool, run_file: str | None, wall_time: float) -> dict:
+    verdict = curve.verdict
+    return {"seed": seed, "model": curve.model, "dgamma": verdict.dgamma, "ratcheting": verdict.ratcheting,
+            "rms_deviation": verdict.rms_deviation, "shakedown": verdict.shakedown,
+            "outlier_cycles": verdict.outlier_cycles, "dgamma_without_outliers": verdict.dgamma_without_outliers,
+            "ratcheting_without_outliers": verdict.ratcheting_without_outliers, "equilibrated": equilibrated,
+            "length_x": curve.length_x.tolist(), "length_y": curve.length_y.tolist(), "run_file": run_file,
+            "wall_time_s": wall_time, "error": None}
+
+
+def ratchet_batch(study: RatchetStudy, seeds, progress=None) -> list[dict]:
+    """Every sample of ``seeds`` prepared, then cycled with each model side by side in one
+    :class:`~granlab.engine.batch.Batch` on ``study.backend`` (one result or error per sample and model, as
+    :func:`ratchet_sample` gives). The batch steps with the smallest of its samples' time steps. A batch
+    that diverges is cycled again sample by sample, so that the sample at fault fails alone.
+    ``progress(done, total, phase)`` hears of each cycle."""
+    results, prepared = [], {}
+    for number, seed in enumerate(seeds, start=1):
+        if progress is not None:
+            progress(0, len(seeds), f"preparing box {number}/{len(seeds)}")
+        try:
+            prepared[seed] = compress(study.particles, seed=seed, pressure=1.0, friction=study.friction,
+                                      normal_model=study.normal_model)
+        except Exception as error:  # reported per sample: the others go on
+            results.extend(_failure(study, seed, model, error) for model in study.models)
+    for model in study.models if prepared else ():
+        start = time.perf_counter()
+        sims = {seed: model_sim(box.sim, study, model) for seed, box in prepared.items()}
+        try:
+            lengths = _cycle_batch(Batch(list(sims.values())), study, model, progress)
+        except DivergenceError:
+            for seed, box in prepared.items():
+                try:
+                    curve = cycle_sample(model_sim(box.sim, study, model), study)
+                    results.append(_result(seed, curve, box.equilibrated, None, time.perf_counter() - start))
+                except Exception as error:  # reported per sample: the others go on
+                    results.append(_failure(study, seed, model, error))
+            continue
+        cycles = np.arange(study.cycles + 1)
+        wall_time = (time.perf_counter() - start) / max(1, len(sims))
+        for k, (seed, box) in enumerate(prepared.items()):
+            curve = ratchet_curve(study, model, cycles, lengths[:, k, 0], lengths[:, k, 1])
+            results.append(_result(seed, curve, box.equilibrated, None, wall_time))
+    if progress is not None:
+        progress(len(seeds), len(seeds), "done")
+    return results
+
+
+def _cycle_batch(batch: Batch, study: RatchetStudy, model: str, progress) -> np.ndarray:
+    """``(cycles + 1, samples, 2)``: each sample's box lengths at the start of every cycle (as
+    :func:`~granlab.engine.protocols.cyclic.run_cycles` records them), the batch cycled by ``study``'s load."""
+    load = study.load()
+    per_cycle = batch.sim.fit_dt(load.period)
+    for name, wall_load in wall_loads(load, batch.sim.time).items():
+        batch.set_wall_load(name, wall_load)
+    lengths = [batch.box_lengths()]
+    for cycle in range(1, study.cycles + 1):
+        batch.sim.run(per_cycle)
+        lengths.append(batch.box_lengths())
+        if progress is not None:
+            progress(0, batch.count, f"{model}: cycle {cycle}/{study.cycles} of {batch.count} samples side by side")
+    return np.array(lengths)
 
 
 def touching_pairs(sim) -> list[tuple[int, int]]:
@@ -275,9 +338,19 @@ def warm_up(models, report) -> None:
 
 def run_ratchet_study(study: RatchetStudy, scheduler: str | None = None, out_dir: str | None = None,
                       progress=None, workers: int | None = None, force: bool = False) -> dict:
-    """Run every sample on Dask and summarise. ``progress(done, total)`` is called as samples finish.
-    Run files already in ``out_dir`` are written over only with ``force``."""
+    """Run every sample on Dask, or in one batch in this process if ``study.batched``, and summarise.
+    ``progress(done, total, phase)`` is called as samples finish. Run files already in ``out_dir`` are
+    written over only with ``force``."""
     seeds = range(study.first_seed, study.first_seed + study.samples)
+    if study.batched:
+        if out_dir is not None:
+            raise ParameterError("out_dir", out_dir, "none for a batched study: a batch's work and dissipation are "
+                                                     "not split by sample, and its run files would lack them")
+        start = time.perf_counter()
+        summary = summarize(study, ratchet_batch(study, seeds, progress))
+        summary["wall_time_s"] = time.perf_counter() - start
+        summary["scheduler"] = f"one batch ({study.backend})"
+        return summary
     if out_dir is not None:
         check_output(out_dir, folder=True)
         for seed in seeds:

@@ -6,6 +6,7 @@ import json
 import numpy as np
 
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
+from granlab.engine.batch import Batch
 from granlab.engine.cuda.check import compare
 from granlab.engine.generate import radii, random_gas
 from granlab.engine.params import TANGENTIAL
@@ -37,7 +38,16 @@ def cohesive_cell(tangential_model):
     return sim
 
 
+def batched_boxes(tangential_model):
+    """Three boxes of 12 disks side by side in one batch: each wall meets its own box's disks alone."""
+    batch = Batch([biaxial_box(12, seed=seed, tangential_model=tangential_model, dt_safety=0.3) for seed in range(3)])
+    batch.sim.run(300)
+    return batch.sim
+
+
 for case in (loaded_box, cohesive_cell):
     for model in TANGENTIAL:
         result = compare(lambda: case(model), STEPS)
         print(json.dumps({"case": case.__name__, "model": model, **result}), flush=True)
+result = compare(lambda: batched_boxes("lammps"), STEPS)
+print(json.dumps({"case": "batched_boxes", "model": "lammps", **result}), flush=True)

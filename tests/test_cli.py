@@ -87,6 +87,21 @@ def test_bench_json_keys_on_a_small_system():
     assert result["contacts_per_disk"] == pytest.approx(2.0)
 
 
+def test_bench_batch_times_a_study_side_by_side_and_one_by_one():
+    """``bench --batch``: both ways timed three times each, the per-sample ratio from their medians."""
+    result = json.loads(granlab("bench", "--batch", "3", "--json").stdout)
+    assert result["samples"] == 3 and result["alone_samples"] == 3 and len(result["batch_times_s"]) == 3
+    assert result["speedup_per_sample"] == pytest.approx(result["alone_s"] / result["batch_s"])
+
+
+def test_study_batch_prints_where_it_ran_and_refuses_run_files():
+    text = granlab("study", "ratchet", "--particles", "6", "--samples", "2", "--cycles", "3", "--period", "0.5",
+                   "--reference-cycle", "0", "--batch").stdout
+    assert "2 samples of 6 disks, 3 cycles" in text and "on one batch (cpu)" in text
+    refused = granlab("study", "ratchet", "--samples", "2", "--batch", "--out", "runs", check=False)
+    assert refused.returncode == 2 and "--batch writes no run files" in refused.stderr
+
+
 def test_errors_exit_with_status_2_and_name_the_problem(tmp_path):
     missing = granlab("run", str(tmp_path / "none.toml"), check=False)
     assert missing.returncode == 2 and "does not exist" in missing.stderr

@@ -23,14 +23,14 @@ SIMULATOR = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
 def test_every_law_on_the_device_ends_where_the_cpu_engine_does():
     """A box of 16 disks pressed by loaded walls (overlap-area normal law, friction, rolling resistance)
     and 24 cohesive disks in a periodic cell under stress control with rolling resistance, each with the
-    four tangential models: after 30 steps the state (disks, walls, cell), the energy ledger and the
+    four tangential models, and three boxes side by side in one batch: after 30 steps the state (disks, walls, cell), the energy ledger and the
     contacts' springs and forces differ from the CPU engine's by at most 1e-12 relative."""
     done = subprocess.run([sys.executable, str(HERE / "cuda_cases.py")], env=SIMULATOR, capture_output=True,
                           text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     cases = [json.loads(line) for line in done.stdout.splitlines()]
     assert {(case["case"], case["model"]) for case in cases} == {
-        (name, model) for name in ("loaded_box", "cohesive_cell") for model in TANGENTIAL}
+        (name, model) for name in ("loaded_box", "cohesive_cell") for model in TANGENTIAL} | {("batched_boxes", "lammps")}
     for case in cases:
         assert case["same_contacts"] and case["contacts"] > 10, case
         assert case["worst"] <= 1e-12, (case["case"], case["model"], case["differences"])
@@ -65,16 +65,17 @@ def test_granlab_run_takes_the_cuda_backend_and_ends_where_the_cpu_does(tmp_path
     assert (tmp_path / "cuda.h5").stat().st_size > 0
 
 
-def test_a_ratchet_study_cycles_on_the_device():
-    """``granlab study ratchet --backend cuda``: the box prepared on the CPU, its cycles on the device (4 disks,
-    3 short cycles), the sample completed and the study's settings saying where it ran."""
+def test_a_ratchet_study_cycles_on_the_device_as_one_batch():
+    """``granlab study ratchet --backend cuda --batch``: the boxes prepared on the CPU, their cycles on the device
+    side by side (2 samples of 4 disks, 3 short cycles), both completed and the study saying where it ran."""
     done = subprocess.run([sys.executable, "-m", "granlab.app.commands", "study", "ratchet", "--particles", "4",
-                           "--samples", "1", "--cycles", "3", "--period", "0.5", "--reference-cycle", "0",
-                           "--backend", "cuda", "--json"], env=SIMULATOR, capture_output=True, text=True, timeout=600)
+                           "--samples", "2", "--cycles", "3", "--period", "0.5", "--reference-cycle", "0",
+                           "--backend", "cuda", "--batch", "--json"], env=SIMULATOR, capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     result = json.loads(done.stdout)
-    assert result["settings"]["backend"] == "cuda"
-    assert result["models"]["cundall-strack"]["completed"] == 1 and result["failed"] == []
+    assert result["settings"]["backend"] == "cuda" and result["scheduler"] == "one batch (cuda)"
+    assert result["models"]["cundall-strack"]["completed"] == 2 and result["failed"] == []
 
 
 def test_without_a_gpu_the_cuda_backend_is_refused_in_one_line_naming_what_runs():

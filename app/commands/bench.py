@@ -27,6 +27,8 @@ def _bench(args) -> dict:
         raise GranLabError(f"bench takes --steps >= 1 and 2 <= --side <= 1000, not {steps} and {args.side}")
     if args.check is not None and args.backend != "cuda":
         raise GranLabError("--check compares a run on the device with the CPU engine: give --backend cuda too")
+    if args.batch is not None:
+        return bench.batch_study(args.batch, args.backend)
     if args.backend == "cuda":
         from granlab.engine.cuda import check_backend
 
@@ -45,6 +47,12 @@ def _bench(args) -> dict:
 
 
 def _print_bench(result: dict) -> None:
+    if "batch_s" in result:
+        print(result["system"])
+        print(f"  side by side in one batch: {result['batch_s']:.2f} s, {1e3 * result['batch_per_sample_s']:.1f} ms a sample")
+        print(f"  one after another, one thread: {result['alone_s']:.2f} s for {result['alone_samples']} samples, "
+              f"{1e3 * result['alone_per_sample_s']:.1f} ms a sample ({result['speedup_per_sample']:.2f}x the batch's)")
+        return
     if "check" in result:
         check = result["check"]
         worst = max(check["differences"], key=check["differences"].get)
@@ -128,6 +136,9 @@ def add(commands) -> None:
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
     bench.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
                        help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
+    bench.add_argument("--batch", type=positive_int, metavar="SAMPLES",
+                       help="a ratchet study's cycles, SAMPLES boxes of 16 disks side by side in one batch against "
+                            "10 of them one after another (on --backend)")
     bench.add_argument("--check", type=positive_int, metavar="N",
                        help="with --backend cuda: run N steps on the device and on the CPU and compare them; exit 1 "
                             "when they differ by more than 1e-12 (relative)")

@@ -16,6 +16,9 @@ from .options import number, positive_int
 def _study(args) -> dict:
     from granlab.engine.studies import RatchetStudy, TextProgress, run_ratchet_study
 
+    if args.batch and args.out:
+        raise GranLabError("--batch writes no run files (a batch's work and dissipation are not split by sample): "
+                           "leave out --out, or --batch")
     models = TANGENTIAL_MODELS if args.model == "all" else (args.model,)
     sweep = len(args.amplitude) > 1
     results = []
@@ -26,7 +29,7 @@ def _study(args) -> dict:
                              phase=None if args.phase is None else math.radians(args.phase), zero_mean=args.zero_mean,
                              friction=args.mu, dt_factor=args.dt_factor, reference_cycle=args.reference_cycle,
                              gravity=args.gravity, first_seed=args.seed, watch_samples=args.watch,
-                             backend=args.backend)
+                             backend=args.backend, batched=args.batch)
         out = str(Path(args.out) / f"amplitude-{amplitude:g}") if sweep and args.out else args.out
         result = run_ratchet_study(study, scheduler=args.scheduler, out_dir=out,
                                    progress=None if args.json else TextProgress(), force=args.force)
@@ -122,6 +125,9 @@ def add(commands) -> None:
     ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
     ratchet.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
                          help="where the cycles run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
+    ratchet.add_argument("--batch", action="store_true",
+                         help="every sample side by side in one simulation in this process (its threads, or one GPU "
+                              "with --backend cuda) instead of one Dask worker a sample; without --out")
     ratchet.add_argument("--out", help="folder for the run files (one per sample and model)")
     ratchet.add_argument("--force", action="store_true", help="write over run files already in --out")
     ratchet.add_argument("--json", action="store_true", help="print one JSON object")
