@@ -1,5 +1,6 @@
 """Run under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``) by tests/test_cuda.py: small runs of every
-law on the device beside the CPU engine; prints one JSON object a case."""
+law on the device beside the CPU engine, in one block a batch of steps and in four launches a step; prints one
+JSON object a case."""
 
 import json
 
@@ -7,6 +8,7 @@ import numpy as np
 
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
 from granlab.engine.batch import Batch
+from granlab.engine.cuda import stepper
 from granlab.engine.cuda.check import compare
 from granlab.engine.generate import radii, random_gas
 from granlab.engine.params import TANGENTIAL
@@ -45,9 +47,14 @@ def batched_boxes(tangential_model):
     return batch.sim
 
 
-for case in (loaded_box, cohesive_cell):
-    for model in TANGENTIAL:
-        result = compare(lambda: case(model), STEPS)
-        print(json.dumps({"case": case.__name__, "model": model, **result}), flush=True)
-result = compare(lambda: batched_boxes("lammps"), STEPS)
-print(json.dumps({"case": "batched_boxes", "model": "lammps", **result}), flush=True)
+def report(case, model, launches):
+    result = compare(lambda: case(model), 100 if case is batched_boxes else STEPS)  # the batch: several launches
+    print(json.dumps({"case": case.__name__, "model": model, "launches": launches, **result}), flush=True)
+
+
+for case in (loaded_box, cohesive_cell, batched_boxes):  # small tables: a batch of steps in one block
+    for model in TANGENTIAL if case is not batched_boxes else ("lammps",):
+        report(case, model, "one a batch")
+stepper.ONE_BLOCK_ROWS = 0  # the four launches a step of a larger table, its rows and disks over many blocks
+for case, model in ((loaded_box, "angle"), (cohesive_cell, "alpha"), (batched_boxes, "lammps")):
+    report(case, model, "four a step")

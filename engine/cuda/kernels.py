@@ -13,6 +13,12 @@ A step is four launches, none of which waits for the host:
 4. ``after_disks``, one block: the blocks' sums, the cell's stress (:func:`~granlab.engine.kernels.integrate.
    pass_totals`) and the checks that end a call (:func:`~granlab.engine.kernels.integrate.step_end`).
 
+A small system (a contact table of at most :data:`granlab.engine.cuda.stepper.ONE_BLOCK_ROWS` rows) takes
+``steps_in_a_block`` instead: one block runs a batch of steps, the four launches its phases between the
+block's barriers (each thread a stride of the rows, then a run of the disks), so that a box of 16 disks is
+one launch for 32 steps, not 128. Its parameters take 4.5 KB, which a launch takes from CUDA 12.1 on (ptxas
+12.9 assembles it for sm_90: 128 registers, 23.5 KB of shared memory); the four kernels stay under 4 KB.
+
 A call's state (``RUN_STOP``, ``RUN_CODE``, ``RUN_STEP``) lives on the device: once a step ends the call
 (its last, a divergence, a rebuild due), the steps launched after it do nothing, so the host launches
 steps in batches and reads the state once a batch. Sums over blocks are taken in block order: a run
@@ -72,7 +78,8 @@ TALLIES, GATHER = 0, 1
 
 
 def build(model: int):
-    """The kernels of tangential model ``model``: ``(contacts, after_contacts, start, disks, after_disks)``."""
+    """The kernels of tangential model ``model``: ``(contacts, after_contacts, start, disks, after_disks,
+    steps_in_a_block)``."""
     contact_row = SINGLE_ROW[model]
 
     @cuda.jit(device=True)
@@ -145,97 +152,65 @@ def build(model: int):
             b += THREADS
         reduce_block(shared, tid, kind)
 
-    @cuda.jit
-    def contacts(p, w, cell, ct, sums, dev):
-        # sums: the workspace's force and wall buffers alone, so that the kernel's parameters stay under the
-        # 4 KB a launch takes before CUDA 12.1 (the whole workspace with them: 4.4 KB)
-        if dev.run[RUN_STOP] != 0:
-            return
-        force_buffer, wall_buffer = sums
-        k = cuda.grid(1)
-        tid = cuda.threadIdx.x
-        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+    @cuda.jit(device=True)
+    def row_forces(p, w, cell, ct, dev, k, force_buffer, wall_buffer, store, shared, tid):
+        """Row ``k``'s geometry and laws, its force added to the disks' sums (atomic additions), its tallies
+        folded into column ``tid`` of ``shared``."""
+        acts, is_wall, i, j, fx, fy, torque_i, torque_j, push, tallies = contact_row(
+            p, w, cell, ct, dev.law, k, dev.numbers[N_DT], dev.numbers[N_MAX_OVERLAP], dev.counts[C_NORMAL_MODEL],
+            store)
+        if acts:
+            cuda.atomic.add(force_buffer, (0, i, 0), fx)
+            cuda.atomic.add(force_buffer, (0, i, 1), fy)
+            cuda.atomic.add(force_buffer, (0, i, 2), torque_i)
+            if is_wall:
+                cuda.atomic.add(wall_buffer, (0, j), -push)
+            else:
+                cuda.atomic.add(force_buffer, (0, j, 0), -fx)
+                cuda.atomic.add(force_buffer, (0, j, 1), -fy)
+                cuda.atomic.add(force_buffer, (0, j, 2), torque_j)
         for s in range(TALLY_SIZE):
-            shared[s, tid] = 0.0
-        if k < ct.count[0]:
-            store = dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
-            acts, is_wall, i, j, fx, fy, torque_i, torque_j, push, tallies = contact_row(
-                p, w, cell, ct, dev.law, k, dev.numbers[N_DT], dev.numbers[N_MAX_OVERLAP], dev.counts[C_NORMAL_MODEL],
-                store)
-            if acts:
-                cuda.atomic.add(force_buffer, (0, i, 0), fx)
-                cuda.atomic.add(force_buffer, (0, i, 1), fy)
-                cuda.atomic.add(force_buffer, (0, i, 2), torque_i)
-                if is_wall:
-                    cuda.atomic.add(wall_buffer, (0, j), -push)
-                else:
-                    cuda.atomic.add(force_buffer, (0, j, 0), -fx)
-                    cuda.atomic.add(force_buffer, (0, j, 1), -fy)
-                    cuda.atomic.add(force_buffer, (0, j, 2), torque_j)
-            for s in range(TALLY_SIZE):
-                shared[s, tid] = tallies[s]
-        sum_block(shared, tid, TALLIES, TALLY_SIZE, dev.block_tallies)
+            if s == TALLY_MAX_OVERLAP:
+                shared[s, tid] = max(shared[s, tid], tallies[s])
+            else:
+                shared[s, tid] += tallies[s]
 
-    @cuda.jit
-    def after_contacts(w, cell, ws, dev, blocks):
-        if dev.run[RUN_STOP] != 0:
-            return
-        tid = cuda.threadIdx.x
-        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
-        reduce_blocks(shared, dev.block_tallies, blocks, TALLY_SIZE, tid, TALLIES)
-        if tid == 0:
-            for s in range(TALLY_SIZE):
-                ws.tally_buffer[0, s] = shared[s, 0]
-            contact_totals(w, ws, 1)
-            for m in range(ws.wall_buffer.shape[1]):
-                ws.wall_buffer[0, m] = 0.0
-            dt = dev.numbers[N_DT]
-            step = dev.run[RUN_STEP]
-            last = step + 1 == dev.counts[C_N_STEPS]
-            t = dev.numbers[N_TIME_ORIGIN] + (dev.counts[C_STEP_OFFSET] + step + 1) * dt
-            kicks = 1 if last else 2
-            drift = 0.0 if last else dt
-            walls_step(w, t, 0.5 * dt, kicks, drift)
-            cell_step(cell, cell.virial, cell.kinetic, 0.5 * dt, kicks, drift, ws.scale)
-
-    @cuda.jit
-    def start(w, cell, ws, dev):
+    @cuda.jit(device=True)
+    def rows_done(w, cell, ws, dev, shared):
+        """One thread, after the rows: their tallies (column 0 of ``shared``), the walls' reactions and the energy
+        tallies, then the walls' and the cell's kick and drift."""
+        for s in range(TALLY_SIZE):
+            ws.tally_buffer[0, s] = shared[s, 0]
+        contact_totals(w, ws, 1)
+        for m in range(ws.wall_buffer.shape[1]):
+            ws.wall_buffer[0, m] = 0.0
         dt = dev.numbers[N_DT]
-        start_boundaries(w, cell, ws, dev.numbers[N_TIME_ORIGIN] + dev.counts[C_STEP_OFFSET] * dt, 0.5 * dt, dt,
-                         ws.scale)
+        step = dev.run[RUN_STEP]
+        last = step + 1 == dev.counts[C_N_STEPS]
+        t = dev.numbers[N_TIME_ORIGIN] + (dev.counts[C_STEP_OFFSET] + step + 1) * dt
+        kicks = 1 if last else 2
+        drift = 0.0 if last else dt
+        walls_step(w, t, 0.5 * dt, kicks, drift)
+        cell_step(cell, cell.virial, cell.kinetic, 0.5 * dt, kicks, drift, ws.scale)
 
-    @cuda.jit
-    def disks(p, ws, dev, mode):
-        if dev.run[RUN_STOP] != 0:
-            return
-        i = cuda.grid(1)
-        tid = cuda.threadIdx.x
-        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
-        out = cuda.local.array(GATHER_SIZE, float64)
+    @cuda.jit(device=True)
+    def disks_range(p, ws, dev, mode, first, stop, out):
+        """The pass over disks ``[first, stop)`` into ``out`` (nothing but the sums' neutral values when empty)."""
         for s in range(GATHER_SIZE):
             out[s] = 0.0
         out[G_MOVER] = 1e300
-        if i < p.position.shape[0]:
+        if first < stop:
             dt = dev.numbers[N_DT]
             last = mode == STEP and dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
             kicks = 1 if mode == START or last else 2
-            particle_range(p, ws.force_buffer, ws.touched, 1, dev.gravity, dev.counts[C_HAS_LOADS] != 0, mode == STEP, last,
-                           0.5 * dt, kicks, 0.0 if last else dt, ws.scale[0], ws.scale[1], ws.reference, i, i + 1,
-                           out)
-            out[G_MOVER] = i
-        for s in range(GATHER_SIZE):
-            shared[s, tid] = out[s]
-        sum_block(shared, tid, GATHER, GATHER_SIZE, dev.block_gather)
+            particle_range(p, ws.force_buffer, ws.touched, 1, dev.gravity, dev.counts[C_HAS_LOADS] != 0, mode == STEP,
+                           last, 0.5 * dt, kicks, 0.0 if last else dt, ws.scale[0], ws.scale[1], ws.reference, first,
+                           stop, out)
 
-    @cuda.jit
-    def after_disks(w, cell, ws, dev, blocks, mode):
-        if dev.run[RUN_STOP] != 0:
-            return
-        tid = cuda.threadIdx.x
-        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
-        reduce_blocks(shared, dev.block_gather, blocks, GATHER_SIZE, tid, GATHER)
-        if tid != 0:
-            return
+    @cuda.jit(device=True)
+    def disks_done(w, cell, ws, dev, shared, mode):
+        """One thread, after the disks: their sums (column 0 of ``shared``), the cell's stress and the checks that
+        end a call."""
         for s in range(GATHER_SIZE):
             ws.gather[s] = shared[s, 0]
         max_overlap = dev.numbers[N_MAX_OVERLAP]
@@ -252,4 +227,91 @@ def build(model: int):
             dev.run[RUN_CODE] = code
             dev.run[RUN_STOP] = 1
 
-    return contacts, after_contacts, start, disks, after_disks
+    @cuda.jit
+    def contacts(p, w, cell, ct, sums, dev):
+        # sums: the workspace's force and wall buffers alone, so that the kernel's parameters stay under the
+        # 4 KB a launch takes before CUDA 12.1 (the whole workspace with them: 4.4 KB)
+        if dev.run[RUN_STOP] != 0:
+            return
+        force_buffer, wall_buffer = sums
+        k = cuda.grid(1)
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+        for s in range(TALLY_SIZE):
+            shared[s, tid] = 0.0
+        if k < ct.count[0]:
+            row_forces(p, w, cell, ct, dev, k, force_buffer, wall_buffer, dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS],
+                       shared, tid)
+        sum_block(shared, tid, TALLIES, TALLY_SIZE, dev.block_tallies)
+
+    @cuda.jit
+    def after_contacts(w, cell, ws, dev, blocks):
+        if dev.run[RUN_STOP] != 0:
+            return
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+        reduce_blocks(shared, dev.block_tallies, blocks, TALLY_SIZE, tid, TALLIES)
+        if tid == 0:
+            rows_done(w, cell, ws, dev, shared)
+
+    @cuda.jit
+    def start(w, cell, ws, dev):
+        dt = dev.numbers[N_DT]
+        start_boundaries(w, cell, ws, dev.numbers[N_TIME_ORIGIN] + dev.counts[C_STEP_OFFSET] * dt, 0.5 * dt, dt,
+                         ws.scale)
+
+    @cuda.jit
+    def disks(p, ws, dev, mode):
+        if dev.run[RUN_STOP] != 0:
+            return
+        i = cuda.grid(1)
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
+        out = cuda.local.array(GATHER_SIZE, float64)
+        disks_range(p, ws, dev, mode, i, min(i + 1, p.position.shape[0]), out)
+        for s in range(GATHER_SIZE):
+            shared[s, tid] = out[s]
+        sum_block(shared, tid, GATHER, GATHER_SIZE, dev.block_gather)
+
+    @cuda.jit
+    def after_disks(w, cell, ws, dev, blocks, mode):
+        if dev.run[RUN_STOP] != 0:
+            return
+        tid = cuda.threadIdx.x
+        shared = cuda.shared.array((GATHER_SIZE, THREADS), float64)
+        reduce_blocks(shared, dev.block_gather, blocks, GATHER_SIZE, tid, GATHER)
+        if tid == 0:
+            disks_done(w, cell, ws, dev, shared, mode)
+
+    @cuda.jit
+    def steps_in_a_block(p, w, cell, ct, ws, dev, steps):
+        """Up to ``steps`` steps of a small system in one block, the four launches of a step its phases between
+        the block's barriers: each thread a stride of the rows, then a run of the disks."""
+        tid = cuda.threadIdx.x
+        tallies = cuda.shared.array((TALLY_SIZE, THREADS), float64)
+        gather = cuda.shared.array((GATHER_SIZE, THREADS), float64)
+        out = cuda.local.array(GATHER_SIZE, float64)
+        n = p.position.shape[0]
+        for _ in range(steps):
+            if dev.run[RUN_STOP] != 0:  # written by thread 0 before the last barrier: every thread reads the same
+                return
+            store = dev.run[RUN_STEP] + 1 == dev.counts[C_N_STEPS]
+            for s in range(TALLY_SIZE):
+                tallies[s, tid] = 0.0
+            k = tid
+            while k < ct.count[0]:
+                row_forces(p, w, cell, ct, dev, k, ws.force_buffer, ws.wall_buffer, store, tallies, tid)
+                k += THREADS
+            reduce_block(tallies, tid, TALLIES)
+            if tid == 0:
+                rows_done(w, cell, ws, dev, tallies)
+            cuda.syncthreads()
+            disks_range(p, ws, dev, STEP, tid * n // THREADS, (tid + 1) * n // THREADS, out)
+            for s in range(GATHER_SIZE):
+                gather[s, tid] = out[s]
+            reduce_block(gather, tid, GATHER)
+            if tid == 0:
+                disks_done(w, cell, ws, dev, gather, STEP)
+            cuda.syncthreads()
+
+    return contacts, after_contacts, start, disks, after_disks, steps_in_a_block

@@ -2,7 +2,8 @@
 
 :class:`DeviceRun` is called as :data:`granlab.engine.kernels.integrate.ADVANCE` is, with the host's
 arrays: it copies the state to the device, launches the steps in batches (one read of the call's
-state a batch, none a step), and copies the state back when the call ends. The contact table is
+state a batch, none a step; a small system's batch in one launch, :data:`ONE_BLOCK_ROWS`), and copies
+the state back when the call ends. The contact table is
 rebuilt on the host, by the CPU engine's :func:`~granlab.engine.kernels.integrate.rebuild`, with the
 state brought back for it and sent again after: the tables of the two backends are the same tables.
 A :class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most).
@@ -22,6 +23,11 @@ from ..kernels.integrate import (CODE_OK, CODE_REBUILD, FLAG_PHASE, FLAG_REBUILD
 
 BATCH = 32
 """Steps launched between two reads of the call's state."""
+
+ONE_BLOCK_ROWS = 16 * THREADS
+"""A contact table of at most this many rows is stepped by one block, ``BATCH`` steps a launch
+(``steps_in_a_block``): a box of a few dozen disks would otherwise be four launches a step, each costing
+more than its work. Larger tables take the four launches, their rows and disks over many blocks."""
 
 _DEVICE_ONLY = ("force_buffer", "touched", "wall_buffer", "tally_buffer", "partial_gather", "row_columns")
 """The workspace's buffers the device keeps in its own shapes (one chunk) and never sends back."""
@@ -62,7 +68,7 @@ class DeviceRun:
         """Up to ``run.n_steps`` steps; returns ``(steps_done, code)``, the state back in the host's arrays."""
         if run.n_steps == 0:
             return 0, CODE_OK
-        contacts, after_contacts, start, disks, after_disks = kernels(self.model)
+        contacts, after_contacts, start, disks, after_disks, steps_in_a_block = kernels(self.model)
         n = p.position.shape[0]
         disk_blocks = _blocks(n)
         dev = Device(law=_to_device(law), gravity=_to_device(np.asarray(run.gravity, np.float64)),
@@ -94,9 +100,13 @@ class DeviceRun:
             if dev.block_tallies.shape[0] < row_blocks:
                 dev = dev._replace(block_tallies=_to_device(np.zeros((row_blocks, TALLY_SIZE))))
             sums = (state.ws.force_buffer, state.ws.wall_buffer)
+            one_block = int(ct.count[0]) <= ONE_BLOCK_ROWS
             stopped = False
             while not stopped:
-                for _ in range(min(BATCH, run.n_steps - done)):
+                steps = min(BATCH, run.n_steps - done)
+                if one_block:
+                    steps_in_a_block[1, THREADS](state.p, state.w, state.cell, state.ct, state.ws, dev, steps)
+                for _ in range(0 if one_block else steps):
                     contacts[row_blocks, THREADS](state.p, state.w, state.cell, state.ct, sums, dev)
                     after_contacts[1, THREADS](state.w, state.cell, state.ws, dev, row_blocks)
                     disks[disk_blocks, THREADS](state.p, state.ws, dev, STEP)
