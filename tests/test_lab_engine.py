@@ -302,8 +302,10 @@ def test_a_save_never_writes_over_a_file_nor_follows_a_link_planted_in_the_data_
     for planted in ("victim.h5.part", ".victim.h5.part", "victim.part.h5", "taken.h5"):
         (tmp_path / planted).symlink_to(outside)
     wait(lambda: engine.status()["time"] > 0.0)
+    seq = engine.messages.latest_seq
     engine.submit("save", name="victim")
-    wait(lambda: (tmp_path / "victim.h5").exists())
+    # the save's own message, which comes after its file: a refusal asked for later is then the latest message
+    wait(lambda: any(text.startswith("saved") for _, text in last_message(engine, seq)))
     assert outside.read_bytes() == b"precious" and not (tmp_path / "victim.h5").is_symlink()
     assert h5md.summary(tmp_path / "victim.h5")["protocol"]["lab_preset"] == "ratchet16"
     for name, allowed in (("taken", "a file inside the lab's data folder"),
