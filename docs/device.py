@@ -1,7 +1,8 @@
 """Speed on a machine with many cores (and a GPU): the reference system's particle-steps per second
 by disks and threads, what a rebuild of the contact table costs, a ratchet study of 100 samples side by
 side in one batch against its samples one by one, and, where numba finds a GPU, the CUDA backend: every
-law beside the CPU engine, its speed at 10⁴-10⁶ disks and the batched study on it. One call, under four
+law beside the CPU engine, small systems stepped by one block against four launches a step, its speed at
+10⁴-10⁶ disks and the batched study on it. One call, under four
 minutes on 16 cores; writes JSON.
 
     python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick] [--breakdown]
@@ -160,6 +161,33 @@ CUDA_SIZES = ((100, 2000), (316, 2000), (1000, 1000))
 """Lattice sides and steps of the device's speed table (10⁴, 10⁵, 10⁶ disks)."""
 
 
+ONE_BLOCK_SIDES = (4, 10, 23, 32)
+"""Lattice sides (16 to 1024 disks, 32 to 2048 rows) timed in one block and in four launches a step."""
+
+
+def one_block_table(steps: int = 3000) -> list[dict]:
+    """The reference system's small sizes stepped by one block, 32 steps a launch, and by four launches a
+    step: where the one block stops paying is where ``stepper.ONE_BLOCK_ROWS`` belongs."""
+    from granlab.engine import bench
+    from granlab.engine.cuda import stepper
+
+    rows = []
+    threshold = stepper.ONE_BLOCK_ROWS
+    for side in ONE_BLOCK_SIDES:
+        row = {"particles": side * side}
+        for name, limit in (("one_block", threshold), ("four_launches", 0)):
+            stepper.ONE_BLOCK_ROWS = limit
+            try:
+                row[name] = bench.device(steps, side)["particle_steps_per_s"]
+            except Exception as error:  # each figure stands or fails alone
+                row[name] = f"{type(error).__name__}: {error}"
+        stepper.ONE_BLOCK_ROWS = threshold
+        rows.append(row)
+        print(f"{side * side:>8} disks on the device: one block {row['one_block']}, four launches "
+              f"{row['four_launches']} particle-steps/s", flush=True)
+    return rows
+
+
 def cuda_table(quick: bool) -> dict:
     """The CUDA backend: every law beside the CPU engine (tests/cuda_cases.py, on the GPU itself), the
     reference system's check after 200 steps, and its particle-steps per second at each size."""
@@ -179,6 +207,7 @@ def cuda_table(quick: bool) -> dict:
             result["checks"].append(bench.device_check(200, side=32, model=model))
         except Exception as error:  # each figure stands or fails alone
             result["checks"].append({"model": model, "error": f"{type(error).__name__}: {error}"})
+    result["one_block"] = one_block_table()
     try:
         result["batch"] = bench.batch_study(100, "cuda", alone_samples=3)
     except Exception as error:

@@ -57,6 +57,10 @@ TANGENTIAL = {model.name: model for model in (
 kernels of a model are the module of :mod:`granlab.engine.kernels.tangential` named after it."""
 TANGENTIAL_MODELS = tuple(TANGENTIAL)
 
+BACKENDS = ("cpu", "cuda")
+"""Where the steps run (:meth:`granlab.engine.simulation.Simulation.use_backend`): the CPU's threads or an NVIDIA
+GPU. Here, not in :mod:`granlab.engine.cuda`, so that the commands' parsers name them without numba."""
+
 
 @dataclass(frozen=True)
 class NormalModel:

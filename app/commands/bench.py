@@ -6,7 +6,7 @@ from __future__ import annotations
 
 
 from granlab.engine.errors import GranLabError
-from granlab.engine.params import TANGENTIAL_MODELS
+from granlab.engine.params import BACKENDS, TANGENTIAL_MODELS
 
 from .options import positive_int
 
@@ -134,7 +134,7 @@ def add(commands) -> None:
                        help="where a particle-step goes on one thread: contact pass per row, pass over the disks, "
                             "the rest, a rebuild")
     bench.add_argument("--side", type=int, default=100, help="disks per side of the lattice (default 100: 10 000)")
-    bench.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+    bench.add_argument("--backend", choices=BACKENDS, default="cpu",
                        help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     bench.add_argument("--batch", type=positive_int, metavar="SAMPLES",
                        help="a ratchet study's cycles, SAMPLES boxes of 16 disks side by side in one batch against "

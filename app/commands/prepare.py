@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from granlab.engine import costs
 from granlab.engine.errors import ParameterError
-from granlab.engine.params import GILABERT_DT_SAFETY
+from granlab.engine.params import BACKENDS, GILABERT_DT_SAFETY
 
 from .options import ROLLING_DAMPING_HELP, number, positive_int, progress_line
 
@@ -92,7 +92,7 @@ def add(commands) -> None:
     prepare.add_argument("--dt-safety", type=number, metavar="F",
                          help=f"methods 1 and 2: the time step as a fraction F of the stability bound, in (0, 1] "
                               f"(default {GILABERT_DT_SAFETY}; 0.3 until 27 Nov 2026)")
-    prepare.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+    prepare.add_argument("--backend", choices=BACKENDS, default="cpu",
                          help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     prepare.add_argument("--out", help="write the packing to a run file")
     prepare.add_argument("--force", action="store_true", help="write over an existing --out file")

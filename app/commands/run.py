@@ -9,7 +9,7 @@ from pathlib import Path
 
 from granlab.engine import costs
 from granlab.engine.errors import DivergenceError
-from granlab.engine.params import TANGENTIAL
+from granlab.engine.params import BACKENDS, TANGENTIAL
 
 from .options import number, positive_int
 
@@ -184,7 +184,7 @@ def add(commands) -> None:
                      help="a checkpoint every K frames (default 10), so a killed run resumes from it")
     run.add_argument("--checkpoint-seconds", type=number, default=60.0, metavar="S",
                      help="... or once S seconds of wall time have passed since the last (default 60)")
-    run.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+    run.add_argument("--backend", choices=BACKENDS, default="cpu",
                      help="where the steps run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.set_defaults(handler=lambda a: run_scene(None if a.resume else a.scene, a.out, a.frame_every, a.resume, a.force,

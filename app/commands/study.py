@@ -8,7 +8,7 @@ from pathlib import Path
 
 from granlab.engine import costs
 from granlab.engine.errors import GranLabError
-from granlab.engine.params import TANGENTIAL_MODELS
+from granlab.engine.params import BACKENDS, TANGENTIAL_MODELS
 
 from .options import number, positive_int
 
@@ -123,7 +123,7 @@ def add(commands) -> None:
     ratchet.add_argument("--watch", type=int, default=0, metavar="K",
                          help="record every contact's (F_n, F_t, status) K times per cycle in the run files")
     ratchet.add_argument("--scheduler", help="address of an existing Dask scheduler (default: local cluster)")
-    ratchet.add_argument("--backend", choices=("cpu", "cuda"), default="cpu",
+    ratchet.add_argument("--backend", choices=BACKENDS, default="cpu",
                          help="where the cycles run: the CPU's threads (default), or an NVIDIA GPU (numba.cuda)")
     ratchet.add_argument("--batch", action="store_true",
                          help="every sample side by side in one simulation in this process (its threads, or one GPU "

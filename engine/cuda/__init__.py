@@ -17,8 +17,7 @@ import numba
 import numpy as np
 
 from ..errors import ParameterError
-
-BACKENDS = ("cpu", "cuda")
+from ..params import BACKENDS
 
 
 def simulated() -> bool:
