@@ -1,6 +1,6 @@
 """Run under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``) by tests/test_cuda.py: small runs of every
-law on the device beside the CPU engine, in one block a batch of steps and in four launches a step; prints one
-JSON object a case."""
+law on the device beside the CPU engine, in one block a batch of steps and in four launches a step, a batch of
+boxes a block a box; prints one JSON object a case."""
 
 import json
 
@@ -41,20 +41,29 @@ def cohesive_cell(tangential_model):
 
 
 def batched_boxes(tangential_model):
-    """Three boxes of 12 disks side by side in one batch: each wall meets its own box's disks alone."""
-    batch = Batch([biaxial_box(12, seed=seed, tangential_model=tangential_model, dt_safety=0.3) for seed in range(3)])
-    batch.sim.run(300)
-    return batch.sim
+    """Three boxes of 12 disks side by side in one batch, their walls pressing from the start (the rows rebuilt
+    every few steps): each wall meets its own box's disks alone."""
+    return Batch([biaxial_box(12, seed=seed, tangential_model=tangential_model, dt_safety=0.3) for seed in range(3)]).sim
 
 
-def report(case, model, launches):
-    result = compare(lambda: case(model), 100 if case is batched_boxes else STEPS)  # the batch: several launches
+def report(case, model, launches, steps=STEPS):
+    result = compare(lambda: case(model), steps)
     print(json.dumps({"case": case.__name__, "model": model, "launches": launches, **result}), flush=True)
 
 
-for case in (loaded_box, cohesive_cell, batched_boxes):  # small tables: a batch of steps in one block
-    for model in TANGENTIAL if case is not batched_boxes else ("lammps",):
+BATCH_STEPS = 150
+"""The batch's steps: its compression rebuilds its rows many times in them."""
+
+for case in (loaded_box, cohesive_cell):  # small tables: a batch of steps in one block
+    for model in TANGENTIAL:
         report(case, model, "one a batch")
+report(batched_boxes, "lammps", "a block a sample", BATCH_STEPS)
+full = stepper.segment_capacity
+stepper.segment_capacity = lambda ranges: int(np.max(ranges[:, 1] - ranges[:, 0])) + 1  # the first rebuild overflows
+report(batched_boxes, "lammps", "a block a sample, then one system", BATCH_STEPS)
+stepper.segment_capacity = full
+stepper.SAMPLES_IN_BLOCKS = False
+report(batched_boxes, "lammps", "one a batch", BATCH_STEPS)
 stepper.ONE_BLOCK_ROWS = 0  # the four launches a step of a larger table, its rows and disks over many blocks
 for case, model in ((loaded_box, "angle"), (cohesive_cell, "alpha"), (batched_boxes, "lammps")):
-    report(case, model, "four a step")
+    report(case, model, "four a step", BATCH_STEPS if case is batched_boxes else STEPS)

@@ -12,7 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..kernels.integrate import INFO_REBUILDS
 from ..simulation import Simulation
+from ..state import STATUS_NONE
 
 TOLERANCE = 1e-12
 """What ``granlab bench --backend cuda --check`` allows (relative, as :func:`compare` measures)."""
@@ -27,11 +29,28 @@ def relative_difference(a: np.ndarray, b: np.ndarray) -> float:
     return difference / scale if scale > 0.0 else difference
 
 
+def interacting(table) -> np.ndarray:
+    """The rows of a contact table that interact (status not none), sorted by disk, other disk or wall, and
+    image: the two backends may hold them in another order, and other candidate rows beside them (a batch on
+    the device rebuilds each sample's rows when that sample needs it)."""
+    count = table.count
+    rows = np.flatnonzero(table.status[:count] != STATUS_NONE)
+    fields = ("tangential_spring", "rolling_spring", "normal_force", "tangential_force")
+    record = np.zeros(rows.size, dtype=[("i", np.int64), ("j", np.int64), ("image_x", np.int64), ("image_y", np.int64),
+                                        ("status", np.int8)] + [(name, np.float64) for name in fields])
+    record["i"], record["j"], record["status"] = table.particle_i[rows], table.particle_j[rows], table.status[rows]
+    record["image_x"], record["image_y"] = table.image[rows, 0], table.image[rows, 1]
+    for name in fields:
+        record[name] = getattr(table, name)[rows]
+    return np.sort(record, order=("i", "j", "image_x", "image_y"))
+
+
 def compare(make: Callable[[], Simulation], steps: int) -> dict:
     """``make()`` run ``steps`` steps on the CPU (every row directly, as the device computes them) and on the
     device: the relative difference of each state array, of the energy ledger and of the contacts' springs,
-    and the largest (``worst``). Contacts are compared where the two tables hold the same rows with the same
-    status (``same_contacts``)."""
+    and the largest (``worst``). Contacts are compared where the two tables hold the same interacting rows
+    with the same status (``same_contacts``, :func:`interacting`); ``rebuilds``: the tables' rebuilds on each
+    (a batch's samples on the device count theirs one by one)."""
     cpu, device = make(), make()
     cpu.gathered = False
     device.use_backend("cuda")
@@ -42,13 +61,14 @@ def compare(make: Callable[[], Simulation], steps: int) -> dict:
                    for part, names in COMPARED.items() for name in names}
     ledgers = [np.array(dataclasses.astuple(sim.energy())) for sim in (cpu, device)]
     differences["energy"] = relative_difference(*ledgers)  # each term against the largest
-    a, b = cpu.contacts, device.contacts
-    rows = slice(0, a.count)
-    same_pairs = a.count == b.count and np.array_equal(a.particle_i[rows], b.particle_i[rows]) and \
-        np.array_equal(a.particle_j[rows], b.particle_j[rows]) and np.array_equal(a.status[rows], b.status[rows])
+    a, b = interacting(cpu.contacts), interacting(device.contacts)
+    same_pairs = a.size == b.size and all(np.array_equal(a[key], b[key])
+                                          for key in ("i", "j", "image_x", "image_y", "status"))
     if same_pairs:
         for name in ("tangential_spring", "rolling_spring", "normal_force", "tangential_force"):
-            differences[f"contacts.{name}"] = relative_difference(getattr(a, name)[rows], getattr(b, name)[rows])
-    return {"steps": steps, "particles": cpu.particles.count, "contacts": int(a.count), "same_contacts": bool(same_pairs),
+            differences[f"contacts.{name}"] = relative_difference(a[name], b[name])
+    rebuilds = [int(sim.workspace.info[INFO_REBUILDS]) for sim in (cpu, device)]
+    return {"steps": steps, "particles": cpu.particles.count, "contacts": int(a.size), "same_contacts": bool(same_pairs),
+            "rebuilds": rebuilds,
             "differences": differences, "worst": max(differences.values()),
             "tolerance": TOLERANCE}

@@ -20,3 +20,13 @@ START, STEP = 0, 1
 Device = namedtuple("Device", "law gravity numbers counts run block_tallies block_gather")
 """What the kernels read besides the state: the law's slots, gravity, the run's numbers and counts,
 the call's state (``RUN_*``) and the blocks' sums."""
+
+R_ROWS, R_DISKS, R_WALLS, R_SEGMENT = 0, 2, 4, 6
+"""Columns of ``Samples.ranges``: each sample's first and past-the-last row, disk and wall, and the rows of its
+segment of the contact table."""
+
+Samples = namedtuple("Samples", "ranges run length_ref tally_buffer virial_correction lagged_virial lagged_kinetic "
+                                "length_reference scale gather flags energy info cell")
+"""What ``samples_in_blocks`` keeps a sample each (a leading axis of samples): its ranges, its call's state
+(``RUN_*``), its walls' ``length_ref`` counted from its first wall, the workspace's sums and flags that are
+the whole system's on the CPU, and the cell's arrays (a ``CellArrays``)."""

@@ -2,8 +2,8 @@
 
 :class:`DeviceRun` is called as :data:`granlab.engine.kernels.integrate.ADVANCE` is, with the host's
 arrays: it copies the state to the device, launches the steps in batches (one read of the call's
-state a batch, none a step; a small system's batch in one launch, :data:`ONE_BLOCK_ROWS`), and copies
-the state back when the call ends. The contact table is
+state a batch, none a step; a small system's batch in one launch, :data:`ONE_BLOCK_ROWS`; a batch of boxes
+a block a box, :data:`SAMPLES_IN_BLOCKS`), and copies the state back when the call ends. The contact table is
 rebuilt on the host, by the CPU engine's :func:`~granlab.engine.kernels.integrate.rebuild`, with the
 state brought back for it and sent again after: the tables of the two backends are the same tables.
 A :class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most).
@@ -16,13 +16,19 @@ import math
 import numpy as np
 
 from . import numba_cuda, simulated
-from .layout import RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device
+from .layout import R_ROWS, RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device, Samples
+from .samples import SPLIT, batch_ranges, compact, join, rows_needed, segment_capacity, segmented, split
 from ..kernels.contacts import TALLY_SIZE
-from ..kernels.integrate import (CODE_OK, CODE_REBUILD, FLAG_PHASE, FLAG_REBUILD, GATHER_SIZE, PHASE_ON_STEP,
-                                 rebuild)
+from ..kernels.integrate import (CODE_OK, CODE_OVERFLOW, CODE_REBUILD, CODE_TUNNEL, FLAG_PHASE, FLAG_REBUILD,
+                                 GATHER_SIZE, PHASE_ON_STEP, rebuild)
+from ..state import CellArrays, ContactArrays
 
 BATCH = 32
 """Steps launched between two reads of the call's state."""
+
+SAMPLES_IN_BLOCKS = True
+"""Whether a batch's samples (:func:`granlab.engine.cuda.samples.batch_ranges`) are stepped a block each, every
+block its own steps and rebuilds, rather than as one system."""
 
 ONE_BLOCK_ROWS = 16 * THREADS
 """A contact table of at most this many rows is stepped by one block, ``BATCH`` steps a launch
@@ -68,9 +74,18 @@ class DeviceRun:
         """Up to ``run.n_steps`` steps; returns ``(steps_done, code)``, the state back in the host's arrays."""
         if run.n_steps == 0:
             return 0, CODE_OK
-        contacts, after_contacts, start, disks, after_disks, steps_in_a_block = kernels(self.model)
-        n = p.position.shape[0]
-        disk_blocks = _blocks(n)
+        ranges = batch_ranges(w, cell, ct, p.position.shape[0]) if SAMPLES_IN_BLOCKS else None
+        if ranges is not None:
+            outcome = self._samples(p, w, cell, ct, ws, law, run, ranges)
+            if outcome is not None:
+                return outcome
+        return self._whole(p, w, cell, ct, spare, ws, law, run)
+
+    def _started(self, p, w, cell, ct, ws, law, run):
+        """The state on the device, the run's numbers, and the call's first half kick and drift if it starts on a
+        whole step: ``(state, dev, code)``, ``code`` None unless that ended the call."""
+        _, _, start, disks, after_disks, _, _ = kernels(self.model)
+        disk_blocks = _blocks(p.position.shape[0])
         dev = Device(law=_to_device(law), gravity=_to_device(np.asarray(run.gravity, np.float64)),
                      numbers=_to_device(np.array([run.dt, run.time_origin, run.skin, run.max_overlap])),
                      counts=_to_device(np.array([run.normal_model, run.has_loads, run.step_offset, run.n_steps],
@@ -85,7 +100,58 @@ class DeviceRun:
             _, code, stopped = _read(dev)
             if stopped:
                 state.download()
-                return 0, code
+                return state, dev, code
+        return state, dev, None
+
+    def _samples(self, p, w, cell, ct, ws, law, run, ranges) -> tuple[int, int] | None:
+        """The steps of a batch, a block a sample (``samples_in_blocks``), each sample's rows in a segment of the
+        table. ``None`` where the call must run again as one system, the host's arrays as they were: a segment
+        filled, a disk moving far enough to pass another (the CPU's driver decides that on the whole system),
+        more rows than the host's table holds."""
+        samples_in_blocks = kernels(self.model)[6]
+        capacity = segment_capacity(ranges)
+        if np.any(ranges[:, R_ROWS + 1] - ranges[:, R_ROWS] > capacity):
+            return None
+        state, dev, code = self._started(p, w, cell, ct, ws, law, run)
+        if code is not None:
+            return 0, code
+        table, segment_ranges = segmented(ct, ranges, capacity)
+        rows = ContactArrays(*(_to_device(a) for a in table))
+        spare_rows = ContactArrays(*(_to_device(np.zeros_like(a)) for a in table))
+        own = split(segment_ranges, w.length_ref, {name: _on_host(getattr(state.ws, name)) for name in SPLIT},
+                    {name: _on_host(getattr(state.cell, name)) for name in CellArrays._fields})
+        own_device = _moved(own, _to_device)
+        count = segment_ranges.shape[0]
+        while True:
+            samples_in_blocks[count, THREADS](state.p, state.w, rows, spare_rows, state.ws, dev, own_device, BATCH)
+            runs = _on_host(own_device.run)
+            if runs[:, RUN_STOP].all():
+                break
+        codes = runs[:, RUN_CODE]
+        own = _moved(own_device, _on_host)
+        if np.any((codes == CODE_TUNNEL) | (codes == CODE_OVERFLOW)) or rows_needed(own.ranges) > ct.particle_i.shape[0]:
+            return None
+        failing = np.flatnonzero(codes != CODE_OK)
+        failed = int(failing[0]) if failing.size else None
+        state.download()
+        workspace, cell_arrays = join(own, failed)
+        for name, value in workspace.items():
+            getattr(ws, name)[...] = value
+        for name, value in cell_arrays.items():
+            getattr(cell, name)[...] = value
+        compact(ContactArrays(*(_on_host(a) for a in rows)), own.ranges, ct)
+        if failed is None:
+            return run.n_steps, CODE_OK
+        return int(runs[failed, RUN_STEP]), int(codes[failed])
+
+    def _whole(self, p, w, cell, ct, spare, ws, law, run) -> tuple[int, int]:
+        """The steps of the whole system: one block a batch of steps for a small table, else four launches a
+        step."""
+        contacts, after_contacts, _, disks, after_disks, steps_in_a_block, _ = kernels(self.model)
+        disk_blocks = _blocks(p.position.shape[0])
+        state, dev, code = self._started(p, w, cell, ct, ws, law, run)
+        if code is not None:
+            return 0, code
         done = 0
         while True:
             flags = np.zeros_like(ws.flags)
@@ -116,6 +182,17 @@ class DeviceRun:
                 state.download()
                 return done, code
             dev = dev._replace(run=_to_device(np.array([0, 0, done], np.int64)))  # RUN_STOP, RUN_CODE, RUN_STEP
+
+
+def _moved(own: Samples, move) -> Samples:
+    """``own`` with ``move`` applied to each of its arrays (its cell's too): to the device or back."""
+    return Samples(**{name: CellArrays(*(move(a) for a in own.cell)) if name == "cell" else move(getattr(own, name))
+                      for name in Samples._fields})
+
+
+def _on_host(device) -> np.ndarray:
+    """A host copy of a device array."""
+    return np.array(device) if simulated() else device.copy_to_host()
 
 
 def _read(dev) -> tuple[int, int, bool]:

@@ -190,31 +190,44 @@ def _transfer_history(old, new, wraps, length, wall_normal, n):
                 found = m
                 break
         if found < 0:
-            new.status[k] = STATUS_NONE
-            new.tangential_spring[k] = 0.0
-            new.rolling_spring[k] = 0.0
-            new.anchor_angle_i[k] = 0.0
-            new.anchor_angle_j[k] = 0.0
-            new.normal_force[k] = 0.0
-            new.tangential_force[k] = 0.0
-            new.surface_gap[k] = math.inf
+            no_history(new, k)
             continue
         if touching(old.status[found]):
             matched += 1
-        new.status[k] = old.status[found]
-        new.tangential_spring[k] = old.tangential_spring[found]
-        new.rolling_spring[k] = old.rolling_spring[found]
-        new.anchor_angle_i[k] = old.anchor_angle_i[found]
-        anchor_j = old.anchor_angle_j[found]
+        carry_history(old, found, new, k)
         if j >= n:
             w = j - n
             # t = z × n = (-n_y, n_x); the wrapped disk moved by -wraps_i · L
-            anchor_j -= -wall_normal[w, 1] * wraps[i, 0] * length[0] + wall_normal[w, 0] * wraps[i, 1] * length[1]
-        new.anchor_angle_j[k] = anchor_j
-        new.normal_force[k] = old.normal_force[found]
-        new.tangential_force[k] = old.tangential_force[found]
-        new.surface_gap[k] = old.surface_gap[found]
+            new.anchor_angle_j[k] -= -wall_normal[w, 1] * wraps[i, 0] * length[0] \
+                + wall_normal[w, 0] * wraps[i, 1] * length[1]
     return active - matched
+
+
+@njit(**JIT)
+def no_history(table, k):
+    """Row ``k`` of ``table`` starts afresh: no status, springs or anchors, no force, its gap unknown."""
+    table.status[k] = STATUS_NONE
+    table.tangential_spring[k] = 0.0
+    table.rolling_spring[k] = 0.0
+    table.anchor_angle_i[k] = 0.0
+    table.anchor_angle_j[k] = 0.0
+    table.normal_force[k] = 0.0
+    table.tangential_force[k] = 0.0
+    table.surface_gap[k] = math.inf
+
+
+@njit(**JIT)
+def carry_history(old, found, new, k):
+    """Row ``k`` of table ``new`` takes the history of row ``found`` of ``old``: status, springs, anchors, the
+    last forces and gap."""
+    new.status[k] = old.status[found]
+    new.tangential_spring[k] = old.tangential_spring[found]
+    new.rolling_spring[k] = old.rolling_spring[found]
+    new.anchor_angle_i[k] = old.anchor_angle_i[found]
+    new.anchor_angle_j[k] = old.anchor_angle_j[found]
+    new.normal_force[k] = old.normal_force[found]
+    new.tangential_force[k] = old.tangential_force[found]
+    new.surface_gap[k] = old.surface_gap[found]
 
 
 @njit(**JIT)
