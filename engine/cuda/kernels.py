@@ -45,7 +45,7 @@ from ..kernels.integrate import (CODE_GO_ON, CODE_LOST_CONTACT, CODE_OK, CODE_OV
                                  INFO_NEEDED, INFO_REBUILDS, PHASE_ON_STEP, cell_step, contact_totals, particle_range, pass_totals,
                                  start_boundaries, start_end, step_end, walls_step)
 from ..kernels.laws import D0, root_reduced_mass, touching
-from ..kernels.neighbours import carry_history, no_history
+from ..kernels.neighbours import carry_history, copy_row, no_history
 from ..state import CellArrays, WallArrays, Workspace
 from .layout import (C_HAS_LOADS, C_N_STEPS, C_NORMAL_MODEL, C_STEP_OFFSET, N_DT, N_MAX_OVERLAP, N_SKIN,
                      N_TIME_ORIGIN, R_DISKS, R_ROWS, R_SEGMENT, R_WALLS, RUN_CODE, RUN_STEP, RUN_STOP, START, STEP,
@@ -408,12 +408,7 @@ def build(model: int):
             work.info[INFO_LOST] = active - matched
             return CODE_LOST_CONTACT
         for k in range(first_row, first_row + count):
-            ct.particle_i[k] = spare.particle_i[k]
-            ct.particle_j[k] = spare.particle_j[k]
-            ct.image[k, 0] = 0
-            ct.image[k, 1] = 0
-            ct.root_reduced_mass[k] = spare.root_reduced_mass[k]
-            carry_history(spare, k, ct, k)
+            copy_row(spare, k, ct, k)
         own.ranges[b, R_ROWS + 1] = first_row + count
         for i in range(d0, d1):
             work.reference[i, 0] = p.position[i, 0]

@@ -235,17 +235,16 @@ def copy_table(source, target):
     """Copy the rows in use of contact table ``source`` into ``target`` (same capacity)."""
     count = source.count[0]
     for k in range(count):
-        target.particle_i[k] = source.particle_i[k]
-        target.particle_j[k] = source.particle_j[k]
-        target.image[k, 0] = source.image[k, 0]
-        target.image[k, 1] = source.image[k, 1]
-        target.root_reduced_mass[k] = source.root_reduced_mass[k]
-        target.tangential_spring[k] = source.tangential_spring[k]
-        target.anchor_angle_i[k] = source.anchor_angle_i[k]
-        target.anchor_angle_j[k] = source.anchor_angle_j[k]
-        target.rolling_spring[k] = source.rolling_spring[k]
-        target.status[k] = source.status[k]
-        target.normal_force[k] = source.normal_force[k]
-        target.tangential_force[k] = source.tangential_force[k]
-        target.surface_gap[k] = source.surface_gap[k]
+        copy_row(source, k, target, k)
     target.count[0] = count
+
+
+@njit(**JIT)
+def copy_row(source, k, target, m):
+    """Row ``m`` of table ``target`` becomes row ``k`` of ``source``: its pair, image, reduced mass and history."""
+    target.particle_i[m] = source.particle_i[k]
+    target.particle_j[m] = source.particle_j[k]
+    target.image[m, 0] = source.image[k, 0]
+    target.image[m, 1] = source.image[k, 1]
+    target.root_reduced_mass[m] = source.root_reduced_mass[k]
+    carry_history(source, k, target, m)
