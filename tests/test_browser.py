@@ -865,7 +865,8 @@ def small_history_lab(tmp_path_factory):
 
 def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, small_history_lab):
     """A class opens and closes tabs all lesson: each tab's session (its document and the series it
-    pulled) must go when it closes. The scene's page is left out to keep the test short."""
+    pulled) must go when it closes, so that two rounds of 8 tabs do not each grow the server. The scene's
+    page is left out to keep the test short."""
     lab = small_history_lab
 
     def churn(tabs: int) -> float:
@@ -881,9 +882,13 @@ def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, sm
         return resident_mib(lab["process"].pid)
 
     before = churn(4)  # the first tabs fill caches that later ones reuse
+    middle = churn(8)
     after = churn(8)
     assert status(lab)["history_mib"] <= 1.0
-    assert after - before < 10.0, f"8 tabs took the server from {before:.1f} to {after:.1f} MiB"
+    # a leak grows the server by each round of tabs (it was 8-14 MiB a round of 8); an allocator's arena or a cache
+    # taken once grows it by one round (once in five fresh runs, 13.5 MiB): the smaller round is the leak's
+    assert min(middle - before, after - middle) < 6.0, \
+        f"8 tabs and 8 more took the server from {before:.1f} to {middle:.1f} and {after:.1f} MiB"
 
 
 def test_a_lab_left_with_no_page_pauses_says_why_and_goes_on_when_a_page_opens(browser, small_history_lab):
