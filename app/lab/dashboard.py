@@ -437,6 +437,7 @@ class Dashboard:
         self._clear_errors()
         if command in ("defaults", "reset"):  # (a preset switch: _new_source)
             self._restart_values_shown = {}  # the settings in effect, N and seed too, back in every box
+            self._asked = {}  # and no value asked before keeps its box: Defaults answers them all
         self.engine.submit(command, **payload)
 
     def _clear_errors(self) -> None:
