@@ -1,9 +1,9 @@
 """Speed on a machine with many cores (and a GPU): the reference system's particle-steps per second
 by disks and threads, what a rebuild of the contact table costs, a ratchet study of 100 samples side by
 side in one batch against its samples one by one, and, where numba finds a GPU, the CUDA backend: every
-law beside the CPU engine, small systems stepped by one block against four launches a step, its speed at
-10⁴-10⁶ disks and the batched study on it. One call, under four
-minutes on 16 cores; writes JSON.
+law beside the CPU engine, its contact table rebuilt beside the CPU engine's (row for row, and a rebuild's
+time at each size), small systems stepped by one block against four launches a step, its speed at
+10⁴-10⁶ disks and the batched study on it. One call, under four minutes on 16 cores; writes JSON.
 
     python docs/device.py --out device.json [--threads 1,2,4,8,16] [--quick] [--breakdown]
 
@@ -188,6 +188,25 @@ def one_block_table(steps: int = 3000) -> list[dict]:
     return rows
 
 
+def rebuild_table(sides) -> list[dict]:
+    """A rebuild of the reference system's contact table on the device, and on one CPU thread (the CPU engine's,
+    which a run on the device took before, the state brought back and sent again besides), at each size."""
+    from granlab.engine import bench
+
+    rows = []
+    for side in sides:
+        sim = bench.reference_system(side)
+        row = {"particles": side * side, "cpu_seconds": bench.rebuild_seconds(sim, repeats=3)}
+        try:
+            row["device_seconds"] = bench.device_rebuild_seconds(sim, repeats=3)
+        except Exception as error:  # each figure stands or fails alone
+            row["device_error"] = f"{type(error).__name__}: {error}"
+        rows.append(row)
+        print(f"{side * side:>8} disks, a rebuild: device {row.get('device_seconds')} s, CPU {row['cpu_seconds']:.4f} s",
+              flush=True)
+    return rows
+
+
 def cuda_table(quick: bool) -> dict:
     """The CUDA backend: every law beside the CPU engine (tests/cuda_cases.py, on the GPU itself), the
     reference system's check after 200 steps, and its particle-steps per second at each size."""
@@ -202,6 +221,12 @@ def cuda_table(quick: bool) -> dict:
     result["cases"] = [json.loads(line) for line in cases.stdout.splitlines() if line.startswith("{")]
     if cases.returncode:
         result["cases_error"] = cases.stderr[-2000:]
+    rebuilt = subprocess.run([sys.executable, os.path.join(os.path.dirname(__file__), "..", "tests", "cuda_rebuild.py")],
+                             capture_output=True, text=True, timeout=300)
+    result["rebuild_cases"] = [json.loads(line) for line in rebuilt.stdout.splitlines() if line.startswith("{")]
+    if rebuilt.returncode:
+        result["rebuild_cases_error"] = rebuilt.stderr[-2000:]
+    result["rebuild"] = rebuild_table([side for side, _ in (CUDA_SIZES[:2] if quick else CUDA_SIZES)])
     for model in ("cundall-strack", "lammps"):
         try:
             result["checks"].append(bench.device_check(200, side=32, model=model))

@@ -184,6 +184,24 @@ def rebuild_seconds(sim: Simulation, repeats: int = 5) -> float:
     return float(np.median(times))
 
 
+def device_rebuild_seconds(sim: Simulation, repeats: int = 5) -> float:
+    """Median wall time of one rebuild of the contact table of ``sim`` on the device
+    (:class:`~granlab.engine.cuda.neighbours.DeviceTable`, its state there; the first, which compiles, not
+    counted): what a run on the device pays for a rebuild, the state staying there."""
+    from .cuda.neighbours import DeviceTable
+    from .cuda.stepper import _State
+    from .kernels.laws import D0
+
+    state = _State(sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(), sim.workspace)
+    table = DeviceTable(state, sim.particles.radius, sim._law_vector[D0] + sim.skin)
+    times = []
+    for _ in range(repeats + 1):
+        start = time.perf_counter()
+        table.rebuild(state)  # reads its code back: the device is done when it returns
+        times.append(time.perf_counter() - start)
+    return float(np.median(times[1:]))
+
+
 def scaling(sides=SCALING_SIDES, steps: int = SCALING_STEPS) -> dict:
     """The reference system at each of ``sides`` (N = side² disks), on one thread: particle-steps
     per second, nanoseconds per particle-step, bytes of state per disk, the cost of one rebuild of

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from granlab.engine.errors import ParameterError
+from granlab.engine.kernels.integrate import CODE_LOST_CONTACT, CODE_OK, CODE_OVERFLOW
 from granlab.engine.params import TANGENTIAL
 
 from .conftest import periodic_gas
@@ -26,8 +27,9 @@ def test_every_law_on_the_device_ends_where_the_cpu_engine_does():
     four tangential models, stepped by one block 32 steps a launch, two also in four launches a step (as a
     larger table is); three boxes side by side in one batch being compressed (150 steps, rows rebuilt many
     times), a block a box (each rebuilding its box's rows), then with segments too small (run again as one
-    system), then as one system in one block and in four launches a step: at the end the state (disks,
-    walls, cell), the energy ledger and the interacting contacts' springs and forces differ from the CPU
+    system), then as one system in one block and in four launches a step: a whole system's table rebuilt on the
+    device as often as the CPU engine rebuilds its own, and at the end the state (disks, walls, cell), the
+    energy ledger and the interacting contacts' springs and forces differ from the CPU
     engine's by at most 1e-12 relative."""
     done = subprocess.run([sys.executable, str(HERE / "cuda_cases.py")], env=SIMULATOR, capture_output=True,
                           text=True, timeout=600)
@@ -40,10 +42,36 @@ def test_every_law_on_the_device_ends_where_the_cpu_engine_does():
         ("loaded_box", "angle", "four a step"), ("cohesive_cell", "alpha", "four a step")}
     for case in cases:
         assert case["same_contacts"] and case["contacts"] >= 5, case
+        cpu_rebuilds, device_rebuilds = case["rebuilds"]
         if case["launches"] == "a block a sample":  # each box rebuilt its own rows, when it needed to
-            cpu_rebuilds, device_rebuilds = case["rebuilds"]
             assert cpu_rebuilds >= 2 and device_rebuilds > cpu_rebuilds, case
+        else:  # the whole table rebuilt on the device when the CPU engine rebuilt its own
+            assert device_rebuilds == cpu_rebuilds, case
         assert case["worst"] <= 1e-12, (case["case"], case["model"], case["differences"])
+
+
+def test_the_device_rebuilds_the_cpu_engines_contact_table_row_for_row():
+    """A cohesive gas periodic along both axes and a sheared layer periodic along x between two walls, each
+    translated by a third of the cell so that a third of the disks are past its side: the table the device
+    rebuilds is the CPU engine's row for row (pairs, images, histories carried, wall anchors moved with a
+    wrapped disk), the disks wrapped alike; a table too small asks for the same rows; a disk whose old rows no
+    longer fit it loses the same touching contacts."""
+    done = subprocess.run([sys.executable, str(HERE / "cuda_rebuild.py")], env=SIMULATOR, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    cases = {case["case"]: case for case in map(json.loads, done.stdout.splitlines())}
+    assert len(cases) == 6
+    for name, case in cases.items():
+        assert case["table_equal"] and case["disks_equal"] and case["workspace_equal"], case
+        cpu_code, device_code = case["codes"]
+        assert cpu_code == device_code and case["wrapped"] >= 10, case
+        if "10 rows" in name:
+            assert cpu_code == CODE_OVERFLOW and case["needed"][0] == case["needed"][1] > 10, case
+        elif "moved" in name:
+            assert cpu_code == CODE_LOST_CONTACT and case["lost"][0] == case["lost"][1] >= 1, case
+        else:
+            assert cpu_code == CODE_OK and case["touching"] >= 5, case
+    assert cases["sheared_layer"]["touching_walls_wrapped"] >= 1
 
 
 def test_bench_check_compares_the_device_with_the_cpu_and_says_so():

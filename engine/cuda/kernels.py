@@ -28,8 +28,10 @@ of parameters; ptxas: 164 registers).
 
 A call's state (``RUN_STOP``, ``RUN_CODE``, ``RUN_STEP``) lives on the device: once a step ends the call
 (its last, a divergence, a rebuild due), the steps launched after it do nothing, so the host launches
-steps in batches and reads the state once a batch. Sums over blocks are taken in block order: a run
-on the device gives the same numbers each time it is run.
+steps in batches and reads the state once a batch. Sums over blocks are taken in block order, but a disk's
+forces, added atomically, meet in the order the threads happen to run: two runs on the device may part by
+rounding, as a run on the device and one on the CPU do. A rebuild due, the host rebuilds the table on the
+device (:mod:`granlab.engine.cuda.neighbours`) and launches on.
 """
 
 from __future__ import annotations

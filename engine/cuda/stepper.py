@@ -4,8 +4,8 @@
 arrays: it copies the state to the device, launches the steps in batches (one read of the call's
 state a batch, none a step; a small system's batch in one launch, :data:`ONE_BLOCK_ROWS`; a batch of boxes
 a block a box, :data:`SAMPLES_IN_BLOCKS`), and copies the state back when the call ends. The contact table is
-rebuilt on the host, by the CPU engine's :func:`~granlab.engine.kernels.integrate.rebuild`, with the
-state brought back for it and sent again after: the tables of the two backends are the same tables.
+rebuilt on the device (:class:`granlab.engine.cuda.neighbours.DeviceTable`), the CPU engine's table row for row,
+the state staying there.
 A :class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most).
 """
 
@@ -16,11 +16,13 @@ import math
 import numpy as np
 
 from . import numba_cuda, simulated
+from .neighbours import DeviceTable
 from .layout import R_ROWS, RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device, Samples
 from .samples import SPLIT, batch_ranges, compact, join, rows_needed, segment_capacity, segmented, split
 from ..kernels.contacts import TALLY_SIZE
 from ..kernels.integrate import (CODE_OK, CODE_OVERFLOW, CODE_REBUILD, CODE_TUNNEL, FLAG_PHASE, FLAG_REBUILD,
-                                 GATHER_SIZE, PHASE_ON_STEP, rebuild)
+                                 GATHER_SIZE, PHASE_ON_STEP)
+from ..kernels.laws import D0
 from ..state import CellArrays, ContactArrays
 
 BATCH = 32
@@ -79,7 +81,7 @@ class DeviceRun:
             outcome = self._samples(p, w, cell, ct, ws, law, run, ranges)
             if outcome is not None:
                 return outcome
-        return self._whole(p, w, cell, ct, spare, ws, law, run)
+        return self._whole(p, w, cell, ct, ws, law, run)
 
     def _started(self, p, w, cell, ct, ws, law, run):
         """The state on the device, the run's numbers, and the call's first half kick and drift if it starts on a
@@ -144,7 +146,7 @@ class DeviceRun:
             return run.n_steps, CODE_OK
         return int(runs[failed, RUN_STEP]), int(codes[failed])
 
-    def _whole(self, p, w, cell, ct, spare, ws, law, run) -> tuple[int, int]:
+    def _whole(self, p, w, cell, ct, ws, law, run) -> tuple[int, int]:
         """The steps of the whole system: one block a batch of steps for a small table, else four launches a
         step."""
         contacts, after_contacts, _, disks, after_disks, steps_in_a_block, _ = kernels(self.model)
@@ -153,20 +155,22 @@ class DeviceRun:
         if code is not None:
             return 0, code
         done = 0
+        rows = int(ct.count[0])
+        table = None
         while True:
             flags = np.zeros_like(ws.flags)
             _to_host(state.ws.flags, flags)
             if flags[FLAG_REBUILD]:
-                state.download()
-                code = rebuild(p, w, cell, ct, spare, ws, law, run.skin)
+                table = table or DeviceTable(state, p.radius, law[D0] + run.skin)
+                code, rows = table.rebuild(state)
                 if code != CODE_OK:
+                    state.download()
                     return done, code
-                state = _State(p, w, cell, ct, ws)
-            row_blocks = _blocks(int(ct.count[0]))
+            row_blocks = _blocks(rows)
             if dev.block_tallies.shape[0] < row_blocks:
                 dev = dev._replace(block_tallies=_to_device(np.zeros((row_blocks, TALLY_SIZE))))
             sums = (state.ws.force_buffer, state.ws.wall_buffer)
-            one_block = int(ct.count[0]) <= ONE_BLOCK_ROWS
+            one_block = rows <= ONE_BLOCK_ROWS
             stopped = False
             while not stopped:
                 steps = min(BATCH, run.n_steps - done)

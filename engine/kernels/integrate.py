@@ -343,17 +343,29 @@ def rebuild(p, w, cell, ct, spare, ws, law, skin):
         ws.info[INFO_LOST] = lost
         return CODE_LOST_CONTACT
     copy_table(spare, ct)
-    for i in range(p.position.shape[0]):
+    rebuilt_disks(p, ws, 0, p.position.shape[0])
+    rebuilt_boundaries(w, cell, ws)
+    return CODE_OK
+
+
+@njit(**KERNEL)
+def rebuilt_disks(p, ws, first, stop):
+    """Disks ``[first, stop)`` after a rebuild: at their wrapped positions, their references for the next."""
+    for i in range(first, stop):
         for a in range(2):
             p.position[i, a] = ws.wrapped[i, a]
             ws.reference[i, a] = ws.wrapped[i, a]
+
+
+@njit(**KERNEL)
+def rebuilt_boundaries(w, cell, ws):
+    """After a rebuild: the walls' and the cell's references for the next, the rebuild done and counted."""
     for m in range(w.offset.shape[0]):
         ws.wall_reference[m] = w.offset[m]
     for a in range(2):
         ws.length_reference[a] = cell.length[a]
     ws.flags[FLAG_REBUILD] = 0
     ws.info[INFO_REBUILDS] += 1
-    return CODE_OK
 
 
 @njit(**KERNEL)
