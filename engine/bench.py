@@ -82,8 +82,8 @@ def run(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack"
 
 
 def device(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
-    """Particle-steps per second of the reference system on the CUDA backend (its state copied to the device
-    and back once a checkpoint block, as every run on it: those copies are timed too)."""
+    """Particle-steps per second of the reference system on the CUDA backend (its state sent to the device and
+    brought back once, as every run on it: those copies are timed too)."""
     sim = reference_system(side, model=model)
     sim.use_backend("cuda")
     sim.run(WARMUP_STEPS)  # the kernels compile at their first launch
@@ -189,10 +189,10 @@ def device_rebuild_seconds(sim: Simulation, repeats: int = 5) -> float:
     (:class:`~granlab.engine.cuda.neighbours.DeviceTable`, its state there; the first, which compiles, not
     counted): what a run on the device pays for a rebuild, the state staying there."""
     from .cuda.neighbours import DeviceTable
-    from .cuda.stepper import _State
+    from .cuda.stepper import DeviceState
     from .kernels.laws import D0
 
-    state = _State(sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(), sim.workspace)
+    state = DeviceState(sim.particles.arrays(), sim.walls.arrays(), sim.cell.arrays(), sim.contacts.arrays(), sim.workspace)
     table = DeviceTable(state, sim.particles.radius, sim._law_vector[D0] + sim.skin)
     times = []
     for _ in range(repeats + 1):

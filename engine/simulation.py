@@ -19,7 +19,7 @@ import numpy as np
 
 from .checkpoint import CheckpointError, check_state
 from .cuda import check_backend
-from .cuda.stepper import DeviceRun
+from .cuda.stepper import DeviceRun, DeviceState
 from .errors import DivergenceError, ParameterError
 from .kernels import gathered as k_gathered, integrate as k_integrate
 from .kernels.energy import (COHESION, ENERGY_SIZE, GRAVITY, KINETIC_ROTATION, KINETIC_TRANSLATION, NORMAL_ELASTIC,
@@ -299,6 +299,9 @@ class Simulation:
     """Where the steps run: ``"cpu"``, the numba kernels on :meth:`threads` threads, or ``"cuda"``, an NVIDIA
     GPU (:mod:`granlab.engine.cuda`, the same laws): :meth:`use_backend`."""
 
+    _device_run: DeviceRun | None = None
+    """Within :meth:`run` on the CUDA backend, the driver holding the state on the device between blocks."""
+
     def __init__(self, particles: ParticleState, law: ContactLaw = ContactLaw(),
                  integration: Integration = Integration(), walls: tuple[Wall, ...] = (),
                  cell: PeriodicCell | None = None, gravity=(0.0, 0.0), check_initial_overlap: bool = True):
@@ -480,7 +483,7 @@ class Simulation:
         while True:
             run = self.run_options(dt, n_steps)
             code = self.tangential_model_code
-            advance = k_integrate.ADVANCE[code] if self.backend == "cpu" else DeviceRun(code)
+            advance = k_integrate.ADVANCE[code] if self.backend == "cpu" else self._device_run or DeviceRun(code)
             done, code = advance(self.particles.arrays(), self.walls.arrays(), self.cell.arrays(),
                                  self.contacts.arrays(), self._spare.arrays(), self.workspace, self._law_vector, run,
                                  None if run.n_chunks == 1 else True)
@@ -513,21 +516,28 @@ class Simulation:
         its state before the block of steps that failed (at most ``CHECKPOINT_STEPS`` earlier).
         """
         remaining = whole("n_steps", n_steps, 0)
-        while remaining > 0:
-            block = min(remaining, CHECKPOINT_STEPS)
-            saved = self._checkpoint()
-            done, code = self._advance(self.dt, block)
-            if code == k_integrate.CODE_TUNNEL and self._fast_disks_fly_free():
-                # the step is whole; its test for a rebuild was skipped by the early return
-                self.workspace.flags[k_integrate.FLAG_REBUILD] = 1
+        if self.backend == "cuda":  # the state stays on the device from one block to the next
+            self._device_run = DeviceRun(self.tangential_model_code, resident=True)
+        try:
+            while remaining > 0:
+                block = min(remaining, CHECKPOINT_STEPS)
+                saved = self._checkpoint()
+                done, code = self._advance(self.dt, block)
+                if code == k_integrate.CODE_TUNNEL and self._fast_disks_fly_free():
+                    # the step is whole; its test for a rebuild was skipped by the early return
+                    self.workspace.flags[k_integrate.FLAG_REBUILD] = 1
+                    remaining -= done
+                    continue
+                if code != k_integrate.CODE_OK:
+                    failed_step = self.step
+                    reason = self._failure_reason(code)
+                    self._restore(saved)
+                    raise DivergenceError(reason, failed_step, self.time)
                 remaining -= done
-                continue
-            if code != k_integrate.CODE_OK:
-                failed_step = self.step
-                reason = self._failure_reason(code)
-                self._restore(saved)
-                raise DivergenceError(reason, failed_step, self.time)
-            remaining -= done
+        finally:
+            if self._device_run is not None:
+                self._device_run.release()
+                self._device_run = None
 
     def run_for(self, duration: float) -> None:
         """Advance by ``duration`` (rounded to a whole number of steps)."""
@@ -579,18 +589,27 @@ class Simulation:
         return f"kernel returned code {code}"
 
     def _checkpoint(self):
+        """The state to go back to if the next block of steps fails: a copy on the host, or on the device while
+        the device holds the state (nothing crosses between the two)."""
+        clock = (self.step, self._step_origin, self._time_origin, self._dt)
+        if self._device_run is not None and self._device_run.state is not None:
+            return self._device_run.state.copy(), clock
         ws = self.workspace
         return (self.particles.copy(), self.walls.copy(), self.cell.copy(), self.contacts.copy(),
-                {name: getattr(ws, name).copy() for name in self.STATE_ARRAYS["workspace"] + ("gather",)},
-                self.step, self._step_origin, self._time_origin, self._dt)
+                {name: getattr(ws, name).copy() for name in self.STATE_ARRAYS["workspace"] + ("gather",)}), clock
 
     def _restore(self, saved) -> None:
-        particles, walls, cell, contacts, arrays, self.step, self._step_origin, self._time_origin, self._dt = saved
-        self.particles, self.walls, self.cell = particles, walls, cell
-        self.contacts = contacts
-        self._spare = ContactTable(contacts.capacity)
-        for name, value in arrays.items():
-            getattr(self.workspace, name)[...] = value
+        state, (self.step, self._step_origin, self._time_origin, self._dt) = saved
+        if isinstance(state, DeviceState):
+            state.download((self.particles.arrays(), self.walls.arrays(), self.cell.arrays(), self.contacts.arrays(),
+                            self.workspace))
+        else:
+            particles, walls, cell, contacts, arrays = state
+            self.particles, self.walls, self.cell = particles, walls, cell
+            self.contacts = contacts
+            self._spare = ContactTable(contacts.capacity)
+            for name, value in arrays.items():
+                getattr(self.workspace, name)[...] = value
         self.workspace.force_buffer[...] = 0.0
 
     # ------------------------------------------------------------------ changing parameters

@@ -67,3 +67,48 @@ report(batched_boxes, "lammps", "one a batch", BATCH_STEPS)
 stepper.ONE_BLOCK_ROWS = 0  # the four launches a step of a larger table, its rows and disks over many blocks
 for case, model in ((loaded_box, "angle"), (cohesive_cell, "alpha"), (batched_boxes, "lammps")):
     report(case, model, "four a step", BATCH_STEPS if case is batched_boxes else STEPS)
+
+
+def resident_cases():
+    """A run of several checkpoint blocks (10 steps each here): on the device the state stays there from one
+    block to the next, sent once and brought back once, where six calls of one block each send it and bring it
+    back six times; a run diverging in its fourth block is put back, on the device as on the CPU, at the state
+    that block started from."""
+    from granlab.engine import simulation
+    from granlab.engine.errors import DivergenceError
+
+    simulation.CHECKPOINT_STEPS = 10
+
+    def crossed(run):
+        sim = loaded_box("angle")
+        sim.use_backend("cuda")
+        before = sum(stepper.CROSSED.values())
+        run(sim)
+        return sum(stepper.CROSSED.values()) - before
+
+    result = compare(lambda: loaded_box("angle"), 60)
+    one_run = crossed(lambda sim: sim.run(60))
+    six_runs = crossed(lambda sim: [sim.run(10) for _ in range(6)])
+    print(json.dumps({"resident": "six blocks", **result, "bytes_one_run": one_run, "bytes_six_runs": six_runs}),
+          flush=True)
+
+    def colliding():
+        """Two disks meeting head on, a soft spring: their overlap passes max_overlap in step 36."""
+        return Simulation(ParticleState(np.array([[0.0, 0.0], [2.6, 0.0]]), np.array([1.0, 1.0]),
+                                        velocity=np.array([[1.0, 0.0], [-1.0, 0.0]])),
+                          ContactLaw(normal_stiffness=1.0, tangential_stiffness=0.5),
+                          Integration(dt=0.01, max_overlap=0.1, initial_overlap=0.05))
+
+    ends = []
+    for backend in ("cpu", "cuda"):
+        sim = colliding()
+        sim.use_backend(backend)
+        try:
+            sim.run(100)
+        except DivergenceError as error:
+            ends.append({"failed_step": error.step, "step": sim.step, "position": sim.particles.position.tolist(),
+                         "velocity": sim.particles.velocity.tolist(), "contacts": int(sim.contacts.count)})
+    print(json.dumps({"resident": "a divergence in the fourth block", "ends": ends}), flush=True)
+
+
+resident_cases()

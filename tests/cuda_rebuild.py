@@ -7,7 +7,7 @@ import numpy as np
 
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation, Wall
 from granlab.engine.cuda.neighbours import DeviceTable
-from granlab.engine.cuda.stepper import _State
+from granlab.engine.cuda.stepper import DeviceState
 from granlab.engine.generate import radii, random_gas
 from granlab.engine.kernels.integrate import INFO_LOST, INFO_NEEDED, rebuild
 from granlab.engine.kernels.laws import D0
@@ -64,7 +64,7 @@ def both(sim, capacity=None):
     p, w, cell, ct, spare, ws = cpu = state()
     cpu_code = rebuild(p, w, cell, ct, spare, ws, sim._law_vector, sim.skin)
     p, w, cell, ct, spare, ws = device = state()
-    on_device = _State(p, w, cell, ct, ws)
+    on_device = DeviceState(p, w, cell, ct, ws)
     device_code, _ = DeviceTable(on_device, p.radius, extra).rebuild(on_device)
     on_device.download()
     return (cpu_code, *cpu), (device_code, *device)

@@ -258,7 +258,7 @@ code and rows (``result``)."""
 
 class DeviceTable:
     """Rebuilds the contact table of a run's state on the device (``state``: its arrays there, the stepper's
-    ``_State``), into a spare table of the same capacity; the scratch is the call's, made at its first rebuild."""
+    ``DeviceState``), into a spare table of the same capacity; the scratch is the call's, made at its first rebuild."""
 
     def __init__(self, state, radius: np.ndarray, extra: float):
         n = radius.shape[0]

@@ -1,13 +1,14 @@
 """The host's side of a run on the device: a call of the step driver, as the CPU's.
 
 :class:`DeviceRun` is called as :data:`granlab.engine.kernels.integrate.ADVANCE` is, with the host's
-arrays: it copies the state to the device, launches the steps in batches (one read of the call's
-state a batch, none a step; a small system's batch in one launch, :data:`ONE_BLOCK_ROWS`; a batch of boxes
-a block a box, :data:`SAMPLES_IN_BLOCKS`), and copies the state back when the call ends. The contact table is
-rebuilt on the device (:class:`granlab.engine.cuda.neighbours.DeviceTable`), the CPU engine's table row for row,
-the state staying there.
-A :class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most).
-"""
+arrays: it copies the state to the device (of the contact table, the rows in use), launches the steps in
+batches (one read of the call's state a batch, none a step; a small system's batch in one launch,
+:data:`ONE_BLOCK_ROWS`; a batch of boxes a block a box, :data:`SAMPLES_IN_BLOCKS`), and copies the state back
+when the call ends. The contact table is rebuilt on the device (:class:`granlab.engine.cuda.neighbours.
+DeviceTable`), the CPU engine's table row for row, the state staying there. A
+:class:`granlab.engine.simulation.Simulation` calls it once a checkpoint block (2000 steps at most), with the
+state staying on the device from one block to the next of a run (``resident``) and the blocks' checkpoints
+copies on the device: a run sends the state once and brings it back once."""
 
 from __future__ import annotations
 
@@ -52,14 +53,26 @@ def kernels(model: int) -> tuple:
     return _KERNELS[model]
 
 
+CROSSED = {"to_device": 0, "to_host": 0}
+"""Bytes of arrays sent to the device and brought back by runs on it, since the process started (the bench and
+the tests read it)."""
+
+
 def _to_device(array: np.ndarray):
     """A copy of ``array`` on the device (the simulator's device is this memory: a copy of its own)."""
     array = np.ascontiguousarray(array)
+    CROSSED["to_device"] += array.nbytes
     return array.copy() if simulated() else numba_cuda().to_device(array)
 
 
 def _to_host(device, host: np.ndarray) -> None:
-    host[...] = device if simulated() else device.copy_to_host()
+    CROSSED["to_host"] += host.nbytes
+    if simulated():
+        host[...] = device
+    elif host.flags.c_contiguous:
+        device.copy_to_host(host)
+    else:
+        host[...] = device.copy_to_host()
 
 
 def _blocks(count: int) -> int:
@@ -67,25 +80,48 @@ def _blocks(count: int) -> int:
 
 
 class DeviceRun:
-    """Runs the steps of tangential model ``model`` on the device; called as the CPU's driver."""
+    """Runs the steps of tangential model ``model`` on the device; called as the CPU's driver.
 
-    def __init__(self, model: int):
+    ``resident``: after a call that ends well the state stays on the device (:attr:`state`), ahead of the host's
+    arrays, and the next call goes on from it; :meth:`release` brings it back. So a run of many checkpoint
+    blocks sends the state once and brings it back once. Otherwise each call sends it and brings it back."""
+
+    def __init__(self, model: int, resident: bool = False):
         self.model = model
+        self.resident = resident
+        self.state: DeviceState | None = None
+
+    def release(self) -> None:
+        """The state back in the host's arrays, if the device holds it."""
+        if self.state is not None:
+            self.state.download()
+            self.state = None
 
     def __call__(self, p, w, cell, ct, spare, ws, law, run, parallel=None) -> tuple[int, int]:
-        """Up to ``run.n_steps`` steps; returns ``(steps_done, code)``, the state back in the host's arrays."""
+        """Up to ``run.n_steps`` steps; returns ``(steps_done, code)``, the state back in the host's arrays
+        unless it stays on the device."""
         if run.n_steps == 0:
             return 0, CODE_OK
-        ranges = batch_ranges(w, cell, ct, p.position.shape[0]) if SAMPLES_IN_BLOCKS else None
+        ranges = batch_ranges(w, cell, ct, p.position.shape[0]) if SAMPLES_IN_BLOCKS and self.state is None else None
         if ranges is not None:
             outcome = self._samples(p, w, cell, ct, ws, law, run, ranges)
             if outcome is not None:
                 return outcome
         return self._whole(p, w, cell, ct, ws, law, run)
 
+    def _ended(self, state: DeviceState, code: int) -> None:
+        """The call ended with ``code``: the state stays on the device if the call ended well and the run is
+        resident, else it comes back."""
+        if code == CODE_OK and self.resident:
+            self.state = state
+        else:
+            state.download()
+            self.state = None
+
     def _started(self, p, w, cell, ct, ws, law, run):
-        """The state on the device, the run's numbers, and the call's first half kick and drift if it starts on a
-        whole step: ``(state, dev, code)``, ``code`` None unless that ended the call."""
+        """The state on the device (sent, or the one it holds), the run's numbers, and the call's first half kick
+        and drift if it starts on a whole step: ``(state, dev, code)``, ``code`` None unless that ended the
+        call (the state then back on the host)."""
         _, _, start, disks, after_disks, _, _ = kernels(self.model)
         disk_blocks = _blocks(p.position.shape[0])
         dev = Device(law=_to_device(law), gravity=_to_device(np.asarray(run.gravity, np.float64)),
@@ -94,14 +130,17 @@ class DeviceRun:
                                                 np.int64)),
                      run=_to_device(np.zeros(RUN_SIZE, np.int64)), block_tallies=_to_device(np.zeros((1, TALLY_SIZE))),
                      block_gather=_to_device(np.zeros((disk_blocks, GATHER_SIZE))))
-        state = _State(p, w, cell, ct, ws)
-        if ws.flags[FLAG_PHASE] == PHASE_ON_STEP:
+        state = self.state or DeviceState(p, w, cell, ct, ws)
+        self.state = None
+        phase = np.zeros_like(ws.flags)
+        _to_host(state.ws.flags, phase)
+        if phase[FLAG_PHASE] == PHASE_ON_STEP:
             start[1, 1](state.w, state.cell, state.ws, dev)
             disks[disk_blocks, THREADS](state.p, state.ws, dev, START)
             after_disks[1, THREADS](state.w, state.cell, state.ws, dev, disk_blocks, START)
             _, code, stopped = _read(dev)
             if stopped:
-                state.download()
+                self._ended(state, code)
                 return state, dev, code
         return state, dev, None
 
@@ -155,7 +194,7 @@ class DeviceRun:
         if code is not None:
             return 0, code
         done = 0
-        rows = int(ct.count[0])
+        rows = _read_count(state.ct)
         table = None
         while True:
             flags = np.zeros_like(ws.flags)
@@ -164,7 +203,7 @@ class DeviceRun:
                 table = table or DeviceTable(state, p.radius, law[D0] + run.skin)
                 code, rows = table.rebuild(state)
                 if code != CODE_OK:
-                    state.download()
+                    self._ended(state, code)
                     return done, code
             row_blocks = _blocks(rows)
             if dev.block_tallies.shape[0] < row_blocks:
@@ -183,7 +222,7 @@ class DeviceRun:
                     after_disks[1, THREADS](state.w, state.cell, state.ws, dev, disk_blocks, STEP)
                 done, code, stopped = _read(dev)
             if code != CODE_REBUILD:
-                state.download()
+                self._ended(state, code)
                 return done, code
             dev = dev._replace(run=_to_device(np.array([0, 0, done], np.int64)))  # RUN_STOP, RUN_CODE, RUN_STEP
 
@@ -196,7 +235,15 @@ def _moved(own: Samples, move) -> Samples:
 
 def _on_host(device) -> np.ndarray:
     """A host copy of a device array."""
+    CROSSED["to_host"] += device.nbytes
     return np.array(device) if simulated() else device.copy_to_host()
+
+
+def _read_count(table) -> int:
+    """The rows in use of a contact table on the device."""
+    count = np.zeros(1, np.int64)
+    _to_host(table.count, count)
+    return int(count[0])
 
 
 def _read(dev) -> tuple[int, int, bool]:
@@ -206,21 +253,63 @@ def _read(dev) -> tuple[int, int, bool]:
     return int(run[RUN_STEP]), int(run[RUN_CODE]), bool(run[RUN_STOP])
 
 
-class _State:
-    """The state's arrays on the device (the host's named tuples, each array copied), and the way back."""
+class DeviceState:
+    """The state's arrays on the device (the host's named tuples, each array copied; of the contact table the
+    rows in use), and the way back: into the host's arrays it came from, or others of the same shapes."""
 
-    def __init__(self, p, w, cell, ct, ws):
+    def __init__(self, p, w, cell, ct, ws, copy_of: DeviceState | None = None):
         self.host = (p, w, cell, ct, ws)
-        self.p, self.w, self.cell, self.ct = (type(t)(*(_to_device(a) for a in t)) for t in (p, w, cell, ct))
+        if copy_of is not None:  # a copy made on the device: nothing crosses to the host
+            self.p, self.w, self.cell, self.ct, self.ws = (type(t)(*(_copied(a) for a in t)) for t in (
+                copy_of.p, copy_of.w, copy_of.cell, copy_of.ct, copy_of.ws))
+            return
+        self.p, self.w, self.cell = (type(t)(*(_to_device(a) for a in t)) for t in (p, w, cell))
+        rows = int(ct.count[0])
+        self.ct = type(ct)(*(_to_device(a) if name == "count" else _rows_to_device(a, rows)
+                             for name, a in zip(ct._fields, ct)))
         n, walls = p.position.shape[0], w.offset.shape[0]
-        mine = dict(force_buffer=np.zeros((1, n, 3)), touched=np.array([[0, max(n, 1) - 1]], np.uint64),
-                    wall_buffer=np.zeros((1, walls)),
-                    tally_buffer=np.zeros((1, TALLY_SIZE)), partial_gather=np.zeros((1, GATHER_SIZE)),
-                    row_columns=np.zeros((1, 1)))
+        mine = {"force_buffer": np.zeros((1, n, 3)), "touched": np.array([[0, max(n, 1) - 1]], np.uint64),
+                "wall_buffer": np.zeros((1, walls)), "tally_buffer": np.zeros((1, TALLY_SIZE)),
+                "partial_gather": np.zeros((1, GATHER_SIZE)), "row_columns": np.zeros((1, 1))}
         self.ws = type(ws)(**{name: _to_device(mine.get(name, getattr(ws, name))) for name in ws._fields})
 
-    def download(self) -> None:
-        for device, host in zip((self.p, self.w, self.cell, self.ct, self.ws), self.host):
-            for name in host._fields:
-                if name not in _DEVICE_ONLY:
-                    _to_host(getattr(device, name), getattr(host, name))
+    def copy(self) -> DeviceState:
+        """A copy of the state on the device, which :meth:`download` brings back later."""
+        return DeviceState(*self.host, copy_of=self)
+
+    def download(self, host=None) -> None:
+        """The state into the host's arrays it came from (``host``: into these instead, of the same shapes but
+        maybe a larger contact table); of the table, the rows in use."""
+        host = self.host if host is None else host
+        rows = _read_count(self.ct)
+        for part, (device, arrays) in enumerate(zip((self.p, self.w, self.cell, self.ct, self.ws), host)):
+            for name in arrays._fields:
+                if name in _DEVICE_ONLY:
+                    continue
+                if part == 3 and name != "count":
+                    if rows:
+                        _to_host(getattr(device, name)[:rows], getattr(arrays, name)[:rows])
+                else:
+                    _to_host(getattr(device, name), getattr(arrays, name))
+
+
+def _copied(device):
+    """A copy on the device of a device array."""
+    if simulated():
+        return device.copy()
+    copy = numba_cuda().device_array_like(device)
+    copy.copy_to_device(device)
+    return copy
+
+
+def _rows_to_device(array: np.ndarray, rows: int):
+    """A device array of ``array``'s shape holding its first ``rows`` rows (the others never read before written)."""
+    CROSSED["to_device"] += array[:rows].nbytes
+    if simulated():
+        device = np.zeros_like(array)
+        device[:rows] = array[:rows]
+        return device
+    device = numba_cuda().device_array(array.shape, array.dtype)
+    if rows:
+        device[:rows].copy_to_device(np.ascontiguousarray(array[:rows]))
+    return device
