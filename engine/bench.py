@@ -84,16 +84,19 @@ def run(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack"
 def device(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
     """Particle-steps per second of the reference system on the CUDA backend (its state sent to the device and
     brought back once, as every run on it: those copies are timed too)."""
+    from .cuda.stepper import CROSSED
+
     sim = reference_system(side, model=model)
     sim.use_backend("cuda")
     sim.run(WARMUP_STEPS)  # the kernels compile at their first launch
+    crossed = sum(CROSSED.values())
     start = time.perf_counter()
     sim.run(steps)
     elapsed = time.perf_counter() - start
     n = sim.particles.count
     return {"system": f"lammps_reference.in: {n} disks, periodic {side}x{side}, {model}, dt=0.001, CUDA backend",
             "backend": "cuda", "particles": n, "steps": steps, "seconds": elapsed,
-            "particle_steps_per_s": n * steps / elapsed}
+            "particle_steps_per_s": n * steps / elapsed, "bytes_crossed": sum(CROSSED.values()) - crossed}
 
 
 def device_check(steps: int, side: int = 100, model: str = "cundall-strack") -> dict:
