@@ -84,7 +84,7 @@ def run(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack"
 def device(steps: int = TIMED_STEPS, side: int = 100, model: str = "cundall-strack") -> dict:
     """Particle-steps per second of the reference system on the CUDA backend (its state sent to the device and
     brought back once, as every run on it: those copies are timed too)."""
-    from .cuda.stepper import CROSSED
+    from .cuda.transfer import CROSSED
 
     sim = reference_system(side, model=model)
     sim.use_backend("cuda")

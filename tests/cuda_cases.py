@@ -8,7 +8,7 @@ import numpy as np
 
 from granlab.engine import ContactLaw, Integration, ParticleState, PeriodicCell, Simulation
 from granlab.engine.batch import Batch
-from granlab.engine.cuda import stepper
+from granlab.engine.cuda import stepper, transfer
 from granlab.engine.cuda.check import compare
 from granlab.engine.generate import radii, random_gas
 from granlab.engine.params import TANGENTIAL
@@ -82,9 +82,9 @@ def resident_cases():
     def crossed(run):
         sim = loaded_box("angle")
         sim.use_backend("cuda")
-        before = sum(stepper.CROSSED.values())
+        before = sum(transfer.CROSSED.values())
         run(sim)
-        return sum(stepper.CROSSED.values()) - before
+        return sum(transfer.CROSSED.values()) - before
 
     result = compare(lambda: loaded_box("angle"), 60)
     one_run = crossed(lambda sim: sim.run(60))

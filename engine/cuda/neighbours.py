@@ -25,7 +25,7 @@ from collections import namedtuple
 import numpy as np
 from numba import int64
 
-from . import numba_cuda, simulated
+from . import numba_cuda
 from ..kernels.integrate import CODE_LOST_CONTACT, CODE_OK, CODE_OVERFLOW, INFO_LOST, INFO_NEEDED, \
     rebuilt_boundaries, rebuilt_disks
 from ..kernels.laws import touching
@@ -33,6 +33,7 @@ from ..kernels.neighbours import MAX_CELLS_PER_PARTICLE, cell_of_disk, copy_row,
     wrap_disk
 from ..state import CELL_NONE, ContactArrays
 from .layout import THREADS
+from .transfer import device_scratch, on_host
 
 cuda = numba_cuda()
 
@@ -85,7 +86,7 @@ def running_sum(values) -> None:
     """``values`` (int64, on the device) replaced by its running (inclusive) sum: tiles scanned a block each,
     their sums scanned the same way, each tile raised by those before it."""
     tiles = math.ceil(values.shape[0] / TILE)
-    sums = _zeros(tiles)
+    sums = device_scratch(tiles, np.int64)  # each tile writes its sum
     _scan_tiles[tiles, THREADS](values, sums)
     if tiles > 1:
         running_sum(sums)
@@ -237,18 +238,6 @@ def _blocks(count: int) -> int:
     return max(1, math.ceil(count / THREADS))
 
 
-def _on_device(array: np.ndarray):
-    return array.copy() if simulated() else cuda.to_device(array)
-
-
-def _zeros(count: int):
-    return _on_device(np.zeros(count, np.int64))
-
-
-def _on_host(array) -> np.ndarray:
-    return np.asarray(array) if simulated() else array.copy_to_host()
-
-
 Lists = namedtuple("Lists", "bounds origin cells width cell_of start filled items row_start first tally result")
 """A rebuild's scratch on the device: the grid's bounds, origin, cells and cell width; each disk's cell, the
 cells' first places (``start``) and places filled, the disks by cell (``items``); each disk's first new row
@@ -258,7 +247,8 @@ code and rows (``result``)."""
 
 class DeviceTable:
     """Rebuilds the contact table of a run's state on the device (``state``: its arrays there, the stepper's
-    ``DeviceState``), into a spare table of the same capacity; the scratch is the call's, made at its first rebuild."""
+    ``DeviceState``), into a spare table of the same capacity; made at the state's first rebuild, it goes with the
+    state (its scratch made once, not at each rebuild)."""
 
     def __init__(self, state, radius: np.ndarray, extra: float):
         n = radius.shape[0]
@@ -266,11 +256,15 @@ class DeviceTable:
         self.extra = extra
         self.cell_size = 2.0 * float(radius.max()) + extra
         cells = max(16, MAX_CELLS_PER_PARTICLE * n)
-        self.spare = ContactArrays(*(_on_device(np.zeros_like(np.asarray(a))) for a in state.host[3]))
-        self.lists = Lists(bounds=_on_device(np.zeros((2, 2))), origin=_on_device(np.zeros(2)), cells=_zeros(2),
-                           width=_on_device(np.zeros(2)), cell_of=_zeros(n), start=_zeros(cells + 1),
-                           filled=_zeros(cells), items=_zeros(n), row_start=_zeros(n + 1), first=_zeros(n + 1),
-                           tally=_zeros(2), result=_zeros(2))
+        # nothing is sent: every array is cleared or written on the device before it is read
+        self.spare = ContactArrays(*(device_scratch(a.shape, a.dtype) for a in state.host[3]))
+        whole = np.int64
+        self.lists = Lists(bounds=device_scratch((2, 2)), origin=device_scratch(2), cells=device_scratch(2, whole),
+                           width=device_scratch(2), cell_of=device_scratch(n, whole),
+                           start=device_scratch(cells + 1, whole), filled=device_scratch(cells, whole),
+                           items=device_scratch(n, whole), row_start=device_scratch(n + 1, whole),
+                           first=device_scratch(n + 1, whole), tally=device_scratch(2, whole),
+                           result=device_scratch(2, whole))
 
     def rebuild(self, state) -> tuple[int, int]:
         """The table of ``state`` rebuilt: ``(code, rows)``."""
@@ -292,5 +286,5 @@ class DeviceTable:
         _history[_blocks(capacity), THREADS](state.ct, self.spare, state.ws, state.cell, state.w, lists)
         _commit[_blocks(max(capacity, n)), THREADS](state.p, state.w, state.cell, state.ct, self.spare, state.ws,
                                                     lists)
-        result = _on_host(lists.result)
+        result = on_host(lists.result)
         return int(result[RESULT_CODE]), int(result[RESULT_ROWS])

@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 
-from . import numba_cuda, simulated
-from .neighbours import DeviceTable
 from .layout import R_ROWS, RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device, Samples
+from .neighbours import DeviceTable
 from .samples import SPLIT, batch_ranges, compact, join, rows_needed, segment_capacity, segmented, split
+from .transfer import copied, on_host, rows_to_device, to_device, to_host
 from ..kernels.contacts import TALLY_SIZE
 from ..kernels.integrate import (CODE_OK, CODE_OVERFLOW, CODE_REBUILD, CODE_TUNNEL, FLAG_PHASE, FLAG_REBUILD,
                                  GATHER_SIZE, PHASE_ON_STEP)
@@ -51,28 +51,6 @@ def kernels(model: int) -> tuple:
 
         _KERNELS[model] = build(model)
     return _KERNELS[model]
-
-
-CROSSED = {"to_device": 0, "to_host": 0}
-"""Bytes of arrays sent to the device and brought back by runs on it, since the process started (the bench and
-the tests read it)."""
-
-
-def _to_device(array: np.ndarray):
-    """A copy of ``array`` on the device (the simulator's device is this memory: a copy of its own)."""
-    array = np.ascontiguousarray(array)
-    CROSSED["to_device"] += array.nbytes
-    return array.copy() if simulated() else numba_cuda().to_device(array)
-
-
-def _to_host(device, host: np.ndarray) -> None:
-    CROSSED["to_host"] += host.nbytes
-    if simulated():
-        host[...] = device
-    elif host.flags.c_contiguous:
-        device.copy_to_host(host)
-    else:
-        host[...] = device.copy_to_host()
 
 
 def _blocks(count: int) -> int:
@@ -124,16 +102,16 @@ class DeviceRun:
         call (the state then back on the host)."""
         _, _, start, disks, after_disks, _, _ = kernels(self.model)
         disk_blocks = _blocks(p.position.shape[0])
-        dev = Device(law=_to_device(law), gravity=_to_device(np.asarray(run.gravity, np.float64)),
-                     numbers=_to_device(np.array([run.dt, run.time_origin, run.skin, run.max_overlap])),
-                     counts=_to_device(np.array([run.normal_model, run.has_loads, run.step_offset, run.n_steps],
+        dev = Device(law=to_device(law), gravity=to_device(np.asarray(run.gravity, np.float64)),
+                     numbers=to_device(np.array([run.dt, run.time_origin, run.skin, run.max_overlap])),
+                     counts=to_device(np.array([run.normal_model, run.has_loads, run.step_offset, run.n_steps],
                                                 np.int64)),
-                     run=_to_device(np.zeros(RUN_SIZE, np.int64)), block_tallies=_to_device(np.zeros((1, TALLY_SIZE))),
-                     block_gather=_to_device(np.zeros((disk_blocks, GATHER_SIZE))))
+                     run=to_device(np.zeros(RUN_SIZE, np.int64)), block_tallies=to_device(np.zeros((1, TALLY_SIZE))),
+                     block_gather=to_device(np.zeros((disk_blocks, GATHER_SIZE))))
         state = self.state or DeviceState(p, w, cell, ct, ws)
         self.state = None
         phase = np.zeros_like(ws.flags)
-        _to_host(state.ws.flags, phase)
+        to_host(state.ws.flags, phase)
         if phase[FLAG_PHASE] == PHASE_ON_STEP:
             start[1, 1](state.w, state.cell, state.ws, dev)
             disks[disk_blocks, THREADS](state.p, state.ws, dev, START)
@@ -157,19 +135,19 @@ class DeviceRun:
         if code is not None:
             return 0, code
         table, segment_ranges = segmented(ct, ranges, capacity)
-        rows = ContactArrays(*(_to_device(a) for a in table))
-        spare_rows = ContactArrays(*(_to_device(np.zeros_like(a)) for a in table))
-        own = split(segment_ranges, w.length_ref, {name: _on_host(getattr(state.ws, name)) for name in SPLIT},
-                    {name: _on_host(getattr(state.cell, name)) for name in CellArrays._fields})
-        own_device = _moved(own, _to_device)
+        rows = ContactArrays(*(to_device(a) for a in table))
+        spare_rows = ContactArrays(*(to_device(np.zeros_like(a)) for a in table))
+        own = split(segment_ranges, w.length_ref, {name: on_host(getattr(state.ws, name)) for name in SPLIT},
+                    {name: on_host(getattr(state.cell, name)) for name in CellArrays._fields})
+        own_device = _moved(own, to_device)
         count = segment_ranges.shape[0]
         while True:
             samples_in_blocks[count, THREADS](state.p, state.w, rows, spare_rows, state.ws, dev, own_device, BATCH)
-            runs = _on_host(own_device.run)
+            runs = on_host(own_device.run)
             if runs[:, RUN_STOP].all():
                 break
         codes = runs[:, RUN_CODE]
-        own = _moved(own_device, _on_host)
+        own = _moved(own_device, on_host)
         if np.any((codes == CODE_TUNNEL) | (codes == CODE_OVERFLOW)) or rows_needed(own.ranges) > ct.particle_i.shape[0]:
             return None
         failing = np.flatnonzero(codes != CODE_OK)
@@ -180,7 +158,7 @@ class DeviceRun:
             getattr(ws, name)[...] = value
         for name, value in cell_arrays.items():
             getattr(cell, name)[...] = value
-        compact(ContactArrays(*(_on_host(a) for a in rows)), own.ranges, ct)
+        compact(ContactArrays(*(on_host(a) for a in rows)), own.ranges, ct)
         if failed is None:
             return run.n_steps, CODE_OK
         return int(runs[failed, RUN_STEP]), int(codes[failed])
@@ -195,19 +173,18 @@ class DeviceRun:
             return 0, code
         done = 0
         rows = _read_count(state.ct)
-        table = None
         while True:
             flags = np.zeros_like(ws.flags)
-            _to_host(state.ws.flags, flags)
+            to_host(state.ws.flags, flags)
             if flags[FLAG_REBUILD]:
-                table = table or DeviceTable(state, p.radius, law[D0] + run.skin)
-                code, rows = table.rebuild(state)
+                state.table = state.table or DeviceTable(state, p.radius, law[D0] + run.skin)
+                code, rows = state.table.rebuild(state)
                 if code != CODE_OK:
                     self._ended(state, code)
                     return done, code
             row_blocks = _blocks(rows)
             if dev.block_tallies.shape[0] < row_blocks:
-                dev = dev._replace(block_tallies=_to_device(np.zeros((row_blocks, TALLY_SIZE))))
+                dev = dev._replace(block_tallies=to_device(np.zeros((row_blocks, TALLY_SIZE))))
             sums = (state.ws.force_buffer, state.ws.wall_buffer)
             one_block = rows <= ONE_BLOCK_ROWS
             stopped = False
@@ -224,7 +201,7 @@ class DeviceRun:
             if code != CODE_REBUILD:
                 self._ended(state, code)
                 return done, code
-            dev = dev._replace(run=_to_device(np.array([0, 0, done], np.int64)))  # RUN_STOP, RUN_CODE, RUN_STEP
+            dev = dev._replace(run=to_device(np.array([0, 0, done], np.int64)))  # RUN_STOP, RUN_CODE, RUN_STEP
 
 
 def _moved(own: Samples, move) -> Samples:
@@ -233,23 +210,17 @@ def _moved(own: Samples, move) -> Samples:
                       for name in Samples._fields})
 
 
-def _on_host(device) -> np.ndarray:
-    """A host copy of a device array."""
-    CROSSED["to_host"] += device.nbytes
-    return np.array(device) if simulated() else device.copy_to_host()
-
-
 def _read_count(table) -> int:
     """The rows in use of a contact table on the device."""
     count = np.zeros(1, np.int64)
-    _to_host(table.count, count)
+    to_host(table.count, count)
     return int(count[0])
 
 
 def _read(dev) -> tuple[int, int, bool]:
     """The call's state: steps done, its code, whether it stopped."""
     run = np.zeros(RUN_SIZE, np.int64)
-    _to_host(dev.run, run)
+    to_host(dev.run, run)
     return int(run[RUN_STEP]), int(run[RUN_CODE]), bool(run[RUN_STOP])
 
 
@@ -259,19 +230,21 @@ class DeviceState:
 
     def __init__(self, p, w, cell, ct, ws, copy_of: DeviceState | None = None):
         self.host = (p, w, cell, ct, ws)
+        self.table: DeviceTable | None = None
+        """What rebuilds this state's contact table on the device, made at its first rebuild."""
         if copy_of is not None:  # a copy made on the device: nothing crosses to the host
-            self.p, self.w, self.cell, self.ct, self.ws = (type(t)(*(_copied(a) for a in t)) for t in (
+            self.p, self.w, self.cell, self.ct, self.ws = (type(t)(*(copied(a) for a in t)) for t in (
                 copy_of.p, copy_of.w, copy_of.cell, copy_of.ct, copy_of.ws))
             return
-        self.p, self.w, self.cell = (type(t)(*(_to_device(a) for a in t)) for t in (p, w, cell))
+        self.p, self.w, self.cell = (type(t)(*(to_device(a) for a in t)) for t in (p, w, cell))
         rows = int(ct.count[0])
-        self.ct = type(ct)(*(_to_device(a) if name == "count" else _rows_to_device(a, rows)
+        self.ct = type(ct)(*(to_device(a) if name == "count" else rows_to_device(a, rows)
                              for name, a in zip(ct._fields, ct)))
         n, walls = p.position.shape[0], w.offset.shape[0]
         mine = {"force_buffer": np.zeros((1, n, 3)), "touched": np.array([[0, max(n, 1) - 1]], np.uint64),
                 "wall_buffer": np.zeros((1, walls)), "tally_buffer": np.zeros((1, TALLY_SIZE)),
                 "partial_gather": np.zeros((1, GATHER_SIZE)), "row_columns": np.zeros((1, 1))}
-        self.ws = type(ws)(**{name: _to_device(mine.get(name, getattr(ws, name))) for name in ws._fields})
+        self.ws = type(ws)(**{name: to_device(mine.get(name, getattr(ws, name))) for name in ws._fields})
 
     def copy(self) -> DeviceState:
         """A copy of the state on the device, which :meth:`download` brings back later."""
@@ -288,28 +261,6 @@ class DeviceState:
                     continue
                 if part == 3 and name != "count":
                     if rows:
-                        _to_host(getattr(device, name)[:rows], getattr(arrays, name)[:rows])
+                        to_host(getattr(device, name)[:rows], getattr(arrays, name)[:rows])
                 else:
-                    _to_host(getattr(device, name), getattr(arrays, name))
-
-
-def _copied(device):
-    """A copy on the device of a device array."""
-    if simulated():
-        return device.copy()
-    copy = numba_cuda().device_array_like(device)
-    copy.copy_to_device(device)
-    return copy
-
-
-def _rows_to_device(array: np.ndarray, rows: int):
-    """A device array of ``array``'s shape holding its first ``rows`` rows (the others never read before written)."""
-    CROSSED["to_device"] += array[:rows].nbytes
-    if simulated():
-        device = np.zeros_like(array)
-        device[:rows] = array[:rows]
-        return device
-    device = numba_cuda().device_array(array.shape, array.dtype)
-    if rows:
-        device[:rows].copy_to_device(np.ascontiguousarray(array[:rows]))
-    return device
+                    to_host(getattr(device, name), getattr(arrays, name))
