@@ -1,11 +1,17 @@
 """What the device's kernels and the host agree on: block size, the call's state, the run's numbers."""
 
+import math
 from collections import namedtuple
 
 from . import simulated
 
 THREADS = 8 if simulated() else 128
 """Threads a block (the simulator runs a Python thread for each: its blocks are small)."""
+
+
+def blocks(count: int) -> int:
+    """Blocks of :data:`THREADS` threads for ``count`` threads (one at least)."""
+    return max(1, math.ceil(count / THREADS))
 
 RUN_STOP, RUN_CODE, RUN_STEP = range(3)
 RUN_SIZE = 3

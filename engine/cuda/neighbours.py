@@ -32,7 +32,7 @@ from ..kernels.laws import touching
 from ..kernels.neighbours import MAX_CELLS_PER_PARTICLE, cell_of_disk, copy_row, disk_rows, fit_grid, row_history, \
     wrap_disk
 from ..state import CELL_NONE, ContactArrays
-from .layout import THREADS
+from .layout import THREADS, blocks
 from .transfer import device_scratch, on_host
 
 cuda = numba_cuda()
@@ -90,7 +90,7 @@ def running_sum(values) -> None:
     _scan_tiles[tiles, THREADS](values, sums)
     if tiles > 1:
         running_sum(sums)
-        _add_tiles[_blocks(values.shape[0]), THREADS](values, sums)
+        _add_tiles[blocks(values.shape[0]), THREADS](values, sums)
 
 
 @cuda.jit
@@ -234,9 +234,6 @@ def _commit(p, w, cell, ct, new, ws, lists):
         result[RESULT_ROWS] = rows
 
 
-def _blocks(count: int) -> int:
-    return max(1, math.ceil(count / THREADS))
-
 
 Lists = namedtuple("Lists", "bounds origin cells width cell_of start filled items row_start first tally result")
 """A rebuild's scratch on the device: the grid's bounds, origin, cells and cell width; each disk's cell, the
@@ -268,23 +265,23 @@ class DeviceTable:
 
     def rebuild(self, state) -> tuple[int, int]:
         """The table of ``state`` rebuilt: ``(code, rows)``."""
-        n, disk_blocks, lists = self.n, _blocks(self.n), self.lists
+        n, disk_blocks, lists = self.n, blocks(self.n), self.lists
         _reset[1, 1](lists.bounds, lists.tally)
         for array in (lists.start, lists.filled, lists.row_start):
-            _clear[_blocks(array.shape[0]), THREADS](array)
+            _clear[blocks(array.shape[0]), THREADS](array)
         _wrap_and_bound[disk_blocks, THREADS](state.p, state.cell, state.ws, lists)
         _fit[1, 1](state.cell, self.cell_size, n, lists)
         _bin[disk_blocks, THREADS](state.ws, lists)
         running_sum(lists.start)
         _place[disk_blocks, THREADS](lists)
-        _sort_cells[_blocks(lists.filled.shape[0]), THREADS](lists)
+        _sort_cells[blocks(lists.filled.shape[0]), THREADS](lists)
         _disk_rows[disk_blocks, THREADS](state.p, state.w, state.cell, state.ws, self.extra, lists, self.spare, False)
         running_sum(lists.row_start)
         _disk_rows[disk_blocks, THREADS](state.p, state.w, state.cell, state.ws, self.extra, lists, self.spare, True)
         capacity = self.spare.particle_i.shape[0]  # the old table's too: enough threads for either's rows
-        _first_rows[_blocks(capacity), THREADS](state.ct, n, lists)
-        _history[_blocks(capacity), THREADS](state.ct, self.spare, state.ws, state.cell, state.w, lists)
-        _commit[_blocks(max(capacity, n)), THREADS](state.p, state.w, state.cell, state.ct, self.spare, state.ws,
+        _first_rows[blocks(capacity), THREADS](state.ct, n, lists)
+        _history[blocks(capacity), THREADS](state.ct, self.spare, state.ws, state.cell, state.w, lists)
+        _commit[blocks(max(capacity, n)), THREADS](state.p, state.w, state.cell, state.ct, self.spare, state.ws,
                                                     lists)
         result = on_host(lists.result)
         return int(result[RESULT_CODE]), int(result[RESULT_ROWS])

@@ -12,11 +12,9 @@ copies on the device: a run sends the state once and brings it back once."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from .layout import R_ROWS, RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device, Samples
+from .layout import R_ROWS, RUN_CODE, RUN_SIZE, RUN_STEP, RUN_STOP, START, STEP, THREADS, Device, Samples, blocks
 from .neighbours import DeviceTable
 from .samples import SPLIT, batch_ranges, compact, join, rows_needed, segment_capacity, segmented, split
 from .transfer import copied, on_host, rows_to_device, to_device, to_host
@@ -52,9 +50,6 @@ def kernels(model: int) -> tuple:
         _KERNELS[model] = build(model)
     return _KERNELS[model]
 
-
-def _blocks(count: int) -> int:
-    return max(1, math.ceil(count / THREADS))
 
 
 class DeviceRun:
@@ -101,7 +96,7 @@ class DeviceRun:
         and drift if it starts on a whole step: ``(state, dev, code)``, ``code`` None unless that ended the
         call (the state then back on the host)."""
         _, _, start, disks, after_disks, _, _ = kernels(self.model)
-        disk_blocks = _blocks(p.position.shape[0])
+        disk_blocks = blocks(p.position.shape[0])
         dev = Device(law=to_device(law), gravity=to_device(np.asarray(run.gravity, np.float64)),
                      numbers=to_device(np.array([run.dt, run.time_origin, run.skin, run.max_overlap])),
                      counts=to_device(np.array([run.normal_model, run.has_loads, run.step_offset, run.n_steps],
@@ -167,7 +162,7 @@ class DeviceRun:
         """The steps of the whole system: one block a batch of steps for a small table, else four launches a
         step."""
         contacts, after_contacts, _, disks, after_disks, steps_in_a_block, _ = kernels(self.model)
-        disk_blocks = _blocks(p.position.shape[0])
+        disk_blocks = blocks(p.position.shape[0])
         state, dev, code = self._started(p, w, cell, ct, ws, law, run)
         if code is not None:
             return 0, code
@@ -182,7 +177,7 @@ class DeviceRun:
                 if code != CODE_OK:
                     self._ended(state, code)
                     return done, code
-            row_blocks = _blocks(rows)
+            row_blocks = blocks(rows)
             if dev.block_tallies.shape[0] < row_blocks:
                 dev = dev._replace(block_tallies=to_device(np.zeros((row_blocks, TALLY_SIZE))))
             sums = (state.ws.force_buffer, state.ws.wall_buffer)
