@@ -8,7 +8,6 @@ run; elsewhere they skip when no Chromium is installed.
 
 import gzip
 import json
-import logging
 import math
 import os
 import re
@@ -26,7 +25,7 @@ from playwright.sync_api import expect
 
 from granlab.app.lab.bench import resident_mib
 from granlab.app.lab.pace import DRAW_WAIT_SECONDS
-from granlab.app.lab.server import TRIM_DELAY, endpoint, read_status, spawn
+from granlab.app.lab.server import TRIM_DELAY, read_status, spawn
 from granlab.engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -733,73 +732,6 @@ def token_lab(tmp_path_factory):
     yield {"url": url, "viewer": viewer, "process": process, "data": data}
     process.terminate()
     process.wait(timeout=30)
-
-
-class _NoRedirect(urllib.request.HTTPRedirectHandler):
-    def redirect_request(self, *args, **kwargs):
-        return None
-
-
-def http_status(url: str, body: list | None = None) -> int:
-    """The status of a GET of ``url`` itself (a redirect is its 3xx, not followed); its text added
-    to ``body``."""
-    try:
-        with urllib.request.build_opener(_NoRedirect).open(url, timeout=10) as response:
-            status, text = response.status, response.read()
-    except urllib.error.HTTPError as error:
-        status, text = error.code, error.read()
-    if body is not None:
-        body.append(text.decode(errors="replace"))
-    return status
-
-
-def test_with_tokens_nothing_answers_without_a_valid_one(token_lab):
-    bare = token_lab["url"].split("?")[0]
-    assert token_lab["viewer"].split("?")[0] == bare and token_lab["viewer"] != token_lab["url"]
-    for url in (bare, bare + "?token=wrong", bare + "status", bare + "scene", bare + "status?token=wrong",
-                bare + "lesson?preset=block", bare + "viewer-scene", bare + "viewer-scene?token=wrong"):
-        assert http_status(url) == 403, url
-    for url in (bare, bare + "?token=wrong"):
-        body = []
-        assert http_status(url, body) == 403, url  # the page itself, no redirect to it
-        assert "open the full address the presenter gave" in body[0], url
-    assert http_status(endpoint(token_lab["viewer"], "status")) == 200
-    # the presenter's address is not printed (a projector may show the terminal) but kept for its owner
-    kept = token_lab["data"] / ".presenter-address"
-    assert kept.stat().st_mode & 0o777 == 0o600 and kept.read_text().strip() == token_lab["url"]
-    # a second lab on the same folder would have written its own presenter's address over this one
-    second = subprocess.run([sys.executable, "-m", "granlab.app.commands", "serve", "--port", "0", "--tokens",
-                             "--data-dir", str(token_lab["data"])], capture_output=True, text=True, timeout=120)
-    assert second.returncode == 2 and second.stderr.count("\n") == 1, second.stderr
-    assert second.stderr.startswith(f"granlab serve: error: --data-dir {str(token_lab['data'])!r} is in use by "
-                                    f"another lab (process {token_lab['process'].pid}): give each lab a folder")
-    assert kept.read_text().strip() == token_lab["url"]
-
-
-def test_with_tokens_no_log_line_shows_a_token_and_a_foreign_websocket_is_one_line(caplog):
-    """The terminal of a lab is often projected: a request's address, an upgrade without bokeh's
-    protocol, any log line writes the tokens as '…'."""
-    from bokeh.protocol.exceptions import ProtocolError
-
-    from granlab.app.lab.server import mask_tokens_in_logs
-
-    factory = logging.getLogRecordFactory()
-    try:
-        mask_tokens_in_logs(("presenterSECRET", "viewerSECRET"))
-        logging.getLogger("tornado.access").warning("%d GET %s (127.0.0.1)", 404, "/nothing?token=presenterSECRET")
-        try:
-            raise ProtocolError("Subprotocol header is not 'bokeh'")
-        except ProtocolError:
-            logging.getLogger("tornado.application").error(
-                "Uncaught exception GET /ws?token=viewerSECRET (127.0.0.1)\nHTTPServerRequest(uri='/ws?token="
-                "viewerSECRET')", exc_info=True)
-    finally:
-        logging.setLogRecordFactory(factory)
-    assert [r.getMessage() for r in caplog.records] == [
-        "404 GET /nothing?token=… (127.0.0.1)",
-        "refused a websocket that does not speak bokeh's protocol (Subprotocol header is not 'bokeh'): "
-        "GET /ws?token=… (127.0.0.1)"]
-    assert "SECRET" not in caplog.text and "Traceback" not in caplog.text
 
 
 def lab_only(page, lab) -> None:

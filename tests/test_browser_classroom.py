@@ -14,8 +14,9 @@ from granlab.app.lab import lessons
 from granlab.app.lab.dashboard import SPEEDS
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
-from tests.test_browser import (PAGE_REFRESH, http_status, lab_only, open_dashboard, scene, status, wait_model,
+from tests.test_browser import (PAGE_REFRESH, lab_only, open_dashboard, scene, status, wait_model,
                                 wait_status)
+from tests.test_lab_access import status_of
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +127,7 @@ def test_the_lesson_pane_shows_the_presets_sheet_and_its_page_to_print(page, lab
     assert urlparse(printable.url).path == "/lesson" and printable.locator("section.lesson-step").count() == len(
         sheet.steps)
     printable.close()
-    assert http_status(lab["url"] + "lesson?preset=nowhere") == 404
+    assert status_of(lab["url"] + "lesson?preset=nowhere") == 404
 
 
 HEADER = ("preset-select", "play-button", "step-button", "reset-button", "defaults-button", "speed-slider",

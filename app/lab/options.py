@@ -20,7 +20,7 @@ from granlab.engine.io.outputs import check_output
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 CLAIM_FILE = ".lab-lock"
-"""The file of the data folder a running lab holds locked (with its process id in it)."""
+"""The file of the data folder the lab holding it writes its process id into."""
 HISTORY_MIB = 64.0
 MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 21
 PAUSE_WITHOUT_PAGES = 60.0
@@ -65,22 +65,33 @@ def check_address(host: str, port: int) -> None:
 @contextlib.contextmanager
 def claimed_data_folder(data_dir):
     """The data folder locked for this lab while in the block; refused if another lab holds it: its
-    presenter's address, its saves and its movies are there."""
+    presenter's address, its saves and its movies are there. The lock is the folder's own (an OS lock
+    on the folder, which ends with the process holding it), so that removing a file frees nothing;
+    the lab's process id is written into the folder's CLAIM_FILE for the refusal to name."""
+    folder = Path(data_dir)
     try:
-        Path(data_dir).mkdir(parents=True, exist_ok=True)
-        handle = open(Path(data_dir) / CLAIM_FILE, "a+")
+        folder.mkdir(parents=True, exist_ok=True)
+        handle = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
     except OSError as error:
         raise GranLabError(f"--data-dir {str(data_dir)!r} cannot be used: {error.strerror}") from error
-    with handle:
+    try:
         if fcntl is not None:
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
-                handle.seek(0)
-                raise GranLabError(f"--data-dir {str(data_dir)!r} is in use by another lab (process "
-                                   f"{handle.read().strip() or '?'}): give each lab a folder of its own") from None
-            handle.seek(0)
-            handle.truncate()
-            handle.write(str(os.getpid()))
-            handle.flush()
+                raise GranLabError(f"--data-dir {str(data_dir)!r} is in use by another lab{_claimant(folder)}: "
+                                   "give each lab a folder of its own") from None
+            with contextlib.suppress(OSError):  # the lock holds without it
+                (folder / CLAIM_FILE).write_text(str(os.getpid()))
         yield
+    finally:
+        os.close(handle)
+
+
+def _claimant(folder: Path) -> str:
+    """" (process ID)" of the lab holding ``folder``, from its CLAIM_FILE ("" if that cannot be read)."""
+    try:
+        pid = (folder / CLAIM_FILE).read_text().strip()
+    except (OSError, UnicodeDecodeError):
+        return ""
+    return f" (process {pid})" if pid.isdigit() else ""

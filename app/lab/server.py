@@ -11,8 +11,9 @@ Served on a network (or with ``tokens``), the lab prints two addresses, each wit
 token: the presenter's, which controls the simulation and its files, and the viewers', which see
 everything live and change nothing. Without a valid token neither the dashboard, its websocket,
 the scene's websocket, ``/status`` nor ``/scene`` answers. The page's first request sets a cookie
-(HttpOnly, SameSite=Strict) that its websocket and later requests carry; the role of a tab is the
-token of the address it was opened with.
+(HttpOnly, SameSite=Strict) that its websocket and later requests carry; the role of a tab is that
+of the request its session is made for (:mod:`.access`), and a request by a name the lab did not
+start with is refused, tokens or not.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ import json
 import logging
 import os
 import re
-import secrets
 import socket
 import subprocess
 import sys
@@ -38,10 +38,6 @@ from pathlib import Path
 
 import panel as pn
 import tornado.web
-import tornado.websocket
-from tornado.iostream import StreamClosedError
-from bokeh.protocol.exceptions import ProtocolError
-from bokeh.server.auth_provider import AuthProvider
 from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST, _env
 from websockets.http11 import Request
@@ -54,8 +50,10 @@ from granlab.engine.params import TANGENTIAL
 from granlab.engine.protocols.presets import PRESETS, preset_settings
 
 from . import lessons
+from .access import Access, TokenAuth, connection_request
 from .dashboard import Dashboard
 from .engine_thread import LabEngine
+from .logs import quiet_client_logs
 from .options import HISTORY_MIB, LOCAL_HOSTS, PAUSE_WITHOUT_PAGES, check_serve_options, claimed_data_folder
 from .scene import SceneView
 from .starting import starting_page
@@ -66,6 +64,7 @@ VIEWER_SCENE = Path(__file__).resolve().parents[2] / "static" / "viewer" / "scen
 # glibc (None elsewhere) keeps what a closed tab's session freed in the arena of the thread that
 # freed it, one arena per thread up to 8 per core: a lab opened and closed in many tabs would hold
 # it all. Two arenas and a trim after sessions end hand it back.
+LOG = logging.getLogger("granlab.lab")
 LIBC = ctypes.CDLL(None)
 MALLOC_TRIM = getattr(LIBC, "malloc_trim", None)
 MALLOPT = getattr(LIBC, "mallopt", None)
@@ -75,89 +74,30 @@ TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it sha
 # a phone lays the page out at its own width (without this, as a 980-pixel desktop page shrunk)
 PAGE_TEMPLATE = _env.from_string('{% extends base %}{% block preamble %}{{ super() }}'
                                  '<meta name="viewport" content="width=device-width, initial-scale=1">{% endblock %}')
-COOKIE = "granlab-token"
-LOCKED_PAGE = ("<!doctype html><title>GranLab</title><body style='font:20px sans-serif;margin:3em'>"
-               "<h1>GranLab</h1><p>This lab is served with tokens: open the full address the presenter gave, "
-               "with its <code>?token=…</code>.</p>")
+class PageHandler(tornado.web.RequestHandler):
+    """A route of the lab: only to a request ``access`` admits (by one of the lab's names; with
+    tokens, a valid one, which the dashboard's cookie carries)."""
 
-
-def request_role(handler: tornado.web.RequestHandler, roles: dict[str, str]) -> str | None:
-    """The role of a request: that of the token in its query (which then goes in the cookie) or in
-    its cookie; None without a valid one."""
-    token = handler.get_query_argument("token", None)
-    if token in roles:
-        if not isinstance(handler, tornado.websocket.WebSocketHandler):
-            handler.set_cookie(COOKIE, token, httponly=True, samesite="Strict")
-        return roles[token]
-    return roles.get(handler.get_cookie(COOKIE))
-
-
-class LockedHandler(tornado.web.RequestHandler):
-    """Where bokeh sends a request without a valid token: a 403 that says what to open."""
-
-    def get(self):
-        self.set_status(403)
-        self.write(LOCKED_PAGE)
-
-
-class TokenAuth(AuthProvider):
-    """Bokeh's check of the dashboard's page, websocket and files: a request needs a valid token."""
-
-    def __init__(self, roles: dict[str, str]):
-        self.roles = roles
-        super().__init__()
-
-    @property
-    def get_user(self):
-        return self._role
-
-    def _role(self, handler: tornado.web.RequestHandler) -> str | None:
-        """The request's role; a page or file asked for without a valid token is answered here, 403
-        with the page saying what to open (bokeh would redirect it to its login address)."""
-        role = request_role(handler, self.roles)
-        if role is None and not isinstance(handler, tornado.websocket.WebSocketHandler):
-            handler.set_status(403)
-            handler.finish(LOCKED_PAGE)
-            raise tornado.web.Finish()
-        return role
-
-    @property
-    def login_url(self) -> str:
-        return "/locked"
-
-    @property
-    def login_handler(self):
-        return LockedHandler
-
-
-class JSONHandler(tornado.web.RequestHandler):
-    """``GET``: the dictionary ``read()`` returns, as JSON (the lab's status, the scene's state);
-    with ``roles``, only to a request with a valid token."""
-
-    def initialize(self, read, roles):
-        self.read = read
-        self.roles = roles
+    def initialize(self, access: Access):
+        self.access = access
 
     def prepare(self):
-        if self.roles and request_role(self, self.roles) is None:
-            raise tornado.web.HTTPError(403, "a valid token is needed")
+        if self.access.admit(self) is None:
+            raise tornado.web.HTTPError(403, "a valid token is needed" if self.access.admits_host(self.request.host)
+                                        else f"this lab does not answer to {self.request.host!r}")
+
+
+class JSONHandler(PageHandler):
+    """``GET``: the dictionary ``read()`` returns, as JSON (the lab's status, the scene's state)."""
+
+    def initialize(self, access: Access, read):
+        super().initialize(access)
+        self.read = read
 
     def get(self):
         self.set_header("Content-Type", "application/json")
         self.set_header("Cache-Control", "no-store")
         self.write(json.dumps(jsonable(self.read())))
-
-
-class PageHandler(tornado.web.RequestHandler):
-    """A page of the lab: with ``roles``, only to a request with a valid token (the dashboard's
-    cookie carries it)."""
-
-    def initialize(self, roles):
-        self.roles = roles
-
-    def prepare(self):
-        if self.roles and request_role(self, self.roles) is None:
-            raise tornado.web.HTTPError(403, "a valid token is needed")
 
 
 class LessonHandler(PageHandler):
@@ -198,7 +138,8 @@ class Lab:
                  preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False,
                  history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES, **changes):
         self.host = host
-        self.roles = {secrets.token_urlsafe(16): role for role in ("presenter", "viewer")} if tokens else {}
+        self.port = port or _free_port(host)
+        self.access = Access(host, self.port, tokens)
         settings = preset_settings(preset, **changes)  # a bad setting is refused before anything starts
         kernel_sets = lab_kernel_sets(settings)
         self.compiles = bool(missing(kernel_sets[0]))
@@ -219,28 +160,23 @@ class Lab:
         self._stop = threading.Event()
         self._release_pending = False
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
-        self.port = port or _free_port(host)
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
         # environment holds (cdn would point every stylesheet at cdn.holoviz.org)
         bokeh_settings.resources.set_value("server")
-        # the dashboard's websocket admits pages of this machine's names; with tokens, the page may be
-        # opened by any address of this machine: each one a page was opened by with a valid token is
-        # admitted then (_admit_page_origin), and no other site's page
-        origins = sorted({f"{name}:{self.port}" for name in (host, "127.0.0.1", "localhost")})
-        auth = {"auth_provider": TokenAuth(self.roles)} if self.roles else {}
-        self.server = pn.serve({"/": self._session}, port=self.port, address=host, websocket_origin=origins,
+        access = {"access": self.access}
+        self.server = pn.serve({"/": self._session}, port=self.port, address=host,
+                               websocket_origin=self.access.websocket_origins(), auth_provider=TokenAuth(self.access),
+                               sign_sessions=True, secret_key=self.access.secret,
                                show=False, start=False, title="GranLab", threaded=False, verbose=False,
-                               extra_patterns=[(r"/status", JSONHandler, {"read": self.status, "roles": self.roles}),
-                                               (r"/scene", JSONHandler, {"read": self.scene.state,
-                                                                         "roles": self.roles}),
-                                               (r"/lesson", LessonHandler, {"roles": self.roles}),
-                                               (r"/viewer-scene", ViewerSceneHandler, {"roles": self.roles}),
-                                               (r"/viewer-stream", StreamSocket,
-                                                {"stream": self.stream, "admit": self._admit_stream})],
+                               extra_patterns=[(r"/status", JSONHandler, {**access, "read": self.status}),
+                                               (r"/scene", JSONHandler, {**access, "read": self.scene.state}),
+                                               (r"/lesson", LessonHandler, access),
+                                               (r"/viewer-scene", ViewerSceneHandler, access),
+                                               (r"/viewer-stream", StreamSocket, {**access, "stream": self.stream})],
                                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
                                # gzip for a browser that accepts it: a phone on the classroom's Wi-Fi fetches
                                # bokeh's and panel's scripts in 0.8 MB rather than 3.0 MB
-                               compress_response=True, **auth)
+                               compress_response=True)
 
     def _start_engine(self, data_dir, preset: str, history_mib: float, pause_without_pages: float, changes: dict,
                       kernel_sets) -> None:
@@ -283,7 +219,13 @@ class Lab:
         # would come from cdn.holoviz.org (LOCAL_DIST is relative to "/", where the dashboard is served)
         pn.state.curdoc.template_variables["dist_url"] = LOCAL_DIST
         pn.state.curdoc.template = PAGE_TEMPLATE
-        self._admit_page_origin()
+        # the role of the request this session is made for, checked again here (bokeh checked it before):
+        # never what the session token's payload says, which is the page's and was made by a client
+        request = connection_request(pn.state.curdoc.session_context)
+        role = self.access.role(request)
+        if role is None:
+            LOG.warning("refused a session: its connection carries no valid token")
+            return pn.pane.HTML(self.access.refusal_page(request))
         if self.engine is None:
             return starting_page(self)
         self.engine.tabs += 1
@@ -291,57 +233,32 @@ class Lab:
         pn.state.on_session_destroyed(self._closed)
         host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
         scene_url = f"http://{host}:{self.scene.port}/"
-        token = self._session_token()
-        viewer = self.roles.get(token) == "viewer"
+        token = self.access.token(role)
+        viewer = role == "viewer"
         if viewer:  # the viewers' own stream, drawn in 2D: compact, and encoded once for all of them
             scene_url = "/viewer-scene?token=" + urllib.parse.quote(token)
         elif token:  # viser's client drops the page's query; its websocket address may carry a path
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
-        query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items() if values}
+        query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items()
+                 if values and isinstance(values[0], bytes)}
         return Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query).view()
-
-    def _admit_page_origin(self) -> None:
-        """With tokens: the address this page was opened by (its request passed the token check) is
-        an origin the dashboard's websocket admits, the page's own."""
-        host = (pn.state.headers or {}).get("Host")
-        if self.roles and host:
-            self.server._tornado.websocket_origins.add(host.lower() if ":" in host else f"{host.lower()}:80")
-
-    def _session_token(self) -> str:
-        """The valid token of the page being opened: in its address, else in its cookie."""
-        if not self.roles:
-            return ""
-        given = pn.state.session_args.get("token", [b""])[0].decode(errors="replace")
-        if given in self.roles:
-            return given
-        cookie = (pn.state.cookies or {}).get(COOKIE, "")
-        return cookie if cookie in self.roles else ""
 
     def _presenter_path(self, path: str) -> bool:
         """Whether a scene client connected with the presenter's token (only its clicks watch a disk)."""
-        return self.roles.get(path.lstrip("/")) == "presenter"
+        return self.access.roles.get(path.lstrip("/")) == "presenter"
 
     def _admit_scene(self, request: Request) -> str | None:
-        """None if the scene's websocket may open, else why not. Without tokens: a browser page
-        from this machine's names for the scene's own port only (or a client that is not a browser:
-        it sends no Origin, and it runs on this machine). With tokens: the page's own origin and a
-        valid token in the path."""
-        origin = request.headers.get("Origin")
-        if self.roles:
-            if origin is not None and urllib.parse.urlsplit(origin).netloc != request.headers.get("Host"):
-                return f"origin {origin} is not the scene's page"
-            return None if request.path.lstrip("/") in self.roles else "a valid token is needed"
-        if origin is None:
-            return None
-        parts = urllib.parse.urlsplit(origin)
-        if parts.hostname in LOCAL_HOSTS + (self.host,) and parts.port == self.scene.port:
-            return None
-        return f"origin {origin} is not the lab's scene page"
-
-    def _admit_stream(self, handler: tornado.web.RequestHandler) -> bool:
-        """Whether a page may receive the viewers' stream: any without tokens (tornado lets in only
-        the lab's own origin), else one with a valid token."""
-        return not self.roles or request_role(handler, self.roles) is not None
+        """None if the scene's websocket may open, else why not: asked for by one of the lab's names on
+        the scene's port, from the scene's own page (or by a client that is not a browser: it sends no
+        Origin); with tokens, a valid token in the path."""
+        host, origin = request.headers.get("Host"), request.headers.get("Origin")
+        if not self.access.admits_host(host, self.scene.port):
+            return f"this lab's scene does not answer to {host!r}"
+        if origin is not None and not self.access.admits_host(urllib.parse.urlsplit(origin).netloc, self.scene.port):
+            return f"origin {origin} is not the lab's scene page"
+        if self.access.roles and request.path.lstrip("/") not in self.access.roles:
+            return "a valid token is needed"
+        return None
 
     def _closed(self, session_context) -> None:
         self.engine.tabs = max(0, self.engine.tabs - 1)  # only a dashboard's session counts its tab
@@ -377,10 +294,10 @@ class Lab:
 
     @property
     def viewer_url(self) -> str | None:
-        return self._address("viewer") if self.roles else None
+        return self._address("viewer") if self.access.roles else None
 
     def _address(self, role: str) -> str:
-        token = next((token for token, given in self.roles.items() if given == role), None)
+        token = self.access.token(role)
         return f"http://{self.host}:{self.port}/" + (f"?token={token}" if token else "")
 
     def start(self) -> None:
@@ -412,41 +329,6 @@ def _free_port(host: str) -> int:
         return sock.getsockname()[1]
 
 
-class ClosedTabFilter(logging.Filter):
-    """Drops the warnings and tracebacks of a message sent to a tab that just closed: a closed
-    tab is normal in a classroom, and the terminal the lab runs in should stay readable."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        closed = (tornado.websocket.WebSocketClosedError, StreamClosedError)
-        if record.exc_info and isinstance(record.exc_info[1], closed):
-            return False
-        message = record.getMessage()
-        return "connection was closed" not in message and "WebSocketClosedError" not in message
-
-
-def mask_tokens_in_logs(tokens) -> None:
-    """From now on every log record writes the lab's ``tokens`` as ``…`` (the terminal the lab runs
-    in is often projected), and a websocket upgrade that does not speak bokeh's protocol is one
-    line, not a traceback."""
-    make_record = logging.getLogRecordFactory()
-
-    def masked(*args, **kwargs) -> logging.LogRecord:
-        record = make_record(*args, **kwargs)
-        if not tokens:
-            return record
-        message = record.getMessage()
-        if record.exc_info and isinstance(record.exc_info[1], ProtocolError):
-            message = f"refused a websocket that does not speak bokeh's protocol ({record.exc_info[1]}): " \
-                      f"{message.splitlines()[0].removeprefix('Uncaught exception ')}"
-            record.exc_info = record.exc_text = None
-        for token in tokens:
-            message = message.replace(token, "…")
-        record.msg, record.args = message, ()
-        return record
-
-    logging.setLogRecordFactory(masked)
-
-
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
           tokens: bool = False, history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES,
           **changes) -> None:
@@ -462,13 +344,11 @@ def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_page
     logging.getLogger("granlab.lab").setLevel(logging.INFO)
     logging.getLogger("granlab.lab").addHandler(logging.StreamHandler(sys.stderr))
     tokens = tokens or host not in LOCAL_HOSTS
-    for name in ("asyncio", "bokeh.server.views.ws", "panel.io.document"):
-        logging.getLogger(name).addFilter(ClosedTabFilter())
     if MALLOPT is not None:
         MALLOPT(M_ARENA_MAX, 2)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
               pause_without_pages=pause_without_pages, **changes)
-    mask_tokens_in_logs(tuple(lab.roles))
+    quiet_client_logs(lab.access.tokens)
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
               "class)", flush=True)

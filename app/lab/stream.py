@@ -35,6 +35,7 @@ import json
 import struct
 import threading
 import time
+import urllib.parse
 import zlib
 
 import numpy as np
@@ -46,6 +47,7 @@ from granlab.engine.frames import meeting_walls
 from ..media.drawing import (CELL_COLOR, CONTACT_KINDS, FORCE_CLASSES, MAX_FORCE_THICKNESS, MECHANISM_COLOR, PALETTES,
                              SPOKE_COLOR, WALL_COLOR, WATCHED_COLORS, WATCHED_THICKNESS, color_index, force_classes,
                              frame_bounds)
+from .access import Access
 from .scene import MECHANISM_THICKNESS
 
 MAX_IN_FLIGHT = 8
@@ -356,17 +358,21 @@ class ViewerStream:
 
 
 class StreamSocket(tornado.websocket.WebSocketHandler):
-    """``/viewer-stream``: a page that ``admit`` lets in (with tokens, a valid one in its cookie or
-    address), from its own origin (tornado's default), receives the stream; what it sends is ignored."""
+    """``/viewer-stream``: a page that ``access`` admits (by one of the lab's names; with tokens, a
+    valid one in its cookie or address), from one of the lab's own pages, receives the stream; what
+    it sends is ignored."""
 
-    def initialize(self, stream: ViewerStream, admit):
+    def initialize(self, stream: ViewerStream, access: Access):
         self.stream = stream
-        self.admit = admit
+        self.access = access
         self.in_flight = 0
 
     def prepare(self):
-        if not self.admit(self):
+        if self.access.admit(self) is None:
             raise tornado.web.HTTPError(403, "a valid token is needed")
+
+    def check_origin(self, origin: str) -> bool:
+        return self.access.admits_host(urllib.parse.urlsplit(origin).netloc)
 
     def open(self):
         self.stream.opened(self)
