@@ -71,7 +71,12 @@ def particle_pass(p, force_buffer, touched, n_chunks, gravity, has_loads, gather
       chunk's only for the disks its rows touched (``touched (T, 2)``: the lowest and highest);
       tally their virial ``sum F_i ⊗ x_i``; add gravity and, if ``has_loads``, the applied
       loads; tally, with the whole-step velocity ``v + half f/m``, the kinetic stress
-      ``sum m v_a²`` and the work of prescribed motions and of loads over ``2 half``;
+      ``sum m v_a²`` and the work of loads over ``2 half``;
+    - tally the work of prescribed motions by the trapezoid rule, each drift's half with the
+      force at its start (the stored force without ``gather``) and half with the force at its
+      end, the drift's velocity being the ``predicted_motion`` a prescribed disk keeps (a force
+      at one end alone, as before, was first order in dt: 1 % of the spring's energy a side of the
+      closed path, the sides' errors of one sign);
       ``store``: keep the totals in ``force``/``torque`` (else they stay those of the last
       store: a call of :func:`advance` stores on its last pass only);
     - ``kicks`` half kicks ``v += half f/m``, ``w += half tau/I`` (dynamic disks only; without
@@ -188,8 +193,8 @@ def particle_range(p, force_buffer, touched, n_chunks, gravity, has_loads, gathe
                 vy_step = vy + half * fy * im
                 kinetic_x += m * vx_step * vx_step
                 kinetic_y += m * vy_step * vy_step
-            else:
-                prescribed -= (fx * vx + fy * vy + tq * w) * work_dt
+            else:  # the drift that brought a prescribed disk here: its force at the end, half the trapezoid
+                prescribed -= (fx * predicted[i, 0] + fy * predicted[i, 1] + tq * predicted[i, 2]) * half
             if store:
                 force[i, 0] = fx
                 force[i, 1] = fy
@@ -210,7 +215,8 @@ def particle_range(p, force_buffer, touched, n_chunks, gravity, has_loads, gathe
             predicted[i, 0] = vx + half * fx * im
             predicted[i, 1] = vy + half * fy * im
             predicted[i, 2] = w + half * tq * ii
-        else:
+        else:  # the drift ahead, its force at the start: the other half of its trapezoid
+            prescribed -= (fx * vx + fy * vy + tq * w) * 0.5 * drift
             predicted[i, 0] = vx
             predicted[i, 1] = vy
             predicted[i, 2] = w
@@ -508,6 +514,7 @@ def start_end(w, cell, ws, skin, max_overlap):
     """After a call's first half kick and drift: its phase, a rebuild flagged if due, and the code the call
     ends with at once (a divergence), or ``CODE_GO_ON``."""
     ws.flags[FLAG_PHASE] = PHASE_DRIFTED
+    ws.energy[E_PRESCRIBED_WORK] += ws.gather[G_PRESCRIBED]
     if _needs_rebuild(w, cell, ws, skin):
         ws.flags[FLAG_REBUILD] = 1
     if ws.gather[G_BAD] > 0:
