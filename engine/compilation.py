@@ -19,6 +19,7 @@ import concurrent.futures
 import contextlib
 import multiprocessing
 import os
+import shutil
 import sys
 import threading
 import time
@@ -191,10 +192,11 @@ def _entry_points(kernel_set: KernelSet) -> list[tuple[object, Callable]]:
     return [(dispatcher, lambda signature: True) for dispatcher in dispatchers]
 
 
-def cached(kernel_set: KernelSet) -> bool:
-    """Whether the kernel cache holds the set, compiled from these sources for this processor."""
+def cached(kernel_set: KernelSet, loaded: bool = True) -> bool:
+    """Whether the kernel cache holds the set, compiled from these sources for this processor (with
+    ``loaded``, a set this process has compiled or loaded counts as held)."""
     for dispatcher, wanted in _entry_points(kernel_set):
-        if any(wanted(signature) for signature in dispatcher.signatures):
+        if loaded and any(wanted(signature) for signature in dispatcher.signatures):
             continue
         cache = dispatcher._cache
         codegen = dispatcher.targetctx.codegen()
@@ -207,9 +209,10 @@ def cached(kernel_set: KernelSet) -> bool:
     return True
 
 
-def missing(names: Iterable[str]) -> list[KernelSet]:
-    """The sets of ``names`` (known to :data:`KERNEL_SETS`) the cache does not hold."""
-    return [KERNEL_SETS[name] for name in dict.fromkeys(names) if not cached(KERNEL_SETS[name])]
+def missing(names: Iterable[str], loaded: bool = True) -> list[KernelSet]:
+    """The sets of ``names`` (known to :data:`KERNEL_SETS`) the cache does not hold (``loaded``: as
+    :func:`cached`)."""
+    return [KERNEL_SETS[name] for name in dict.fromkeys(names) if not cached(KERNEL_SETS[name], loaded)]
 
 
 def exercise(name: str) -> float:
@@ -278,12 +281,16 @@ class Progress:
         self.done += count
         self.show(force=True)
 
-    def close(self) -> None:
+    def close(self, unkept: int = 0) -> None:
+        """The last line: how long it took, and whether the kernels were kept (``unkept``: sets that
+        could not be)."""
         self._stop.set()
         with self._lock:
             seconds = time.monotonic() - self.start
             end = "\r\033[K" if self.stream.isatty() and not self.background else ""
-            print(f"{end}compiled in {seconds:.0f} s (kept for the next runs)", file=self.stream, flush=True)
+            kept = f"but {unkept} of {self.total} sets could not be kept ({not_kept()}): the next run compiles them " \
+                   "again" if unkept else "kept for the next runs"
+            print(f"{end}compiled in {seconds:.0f} s ({kept})", file=self.stream, flush=True)
         if self.on_change is not None:
             self.on_change({**self.state(), "done": self.total, "current": ""})
 
@@ -321,6 +328,7 @@ def compile_sets(names: Iterable[str], workers: int | None = None, stream=None,
     progress = Progress(len(todo), stream, on_change, background)
     if workers is None:
         workers = 0 if len(todo) == 1 else workers_for(len(todo))
+    unkept = 0
     try:
         if workers == 0:
             for kernel_set in todo:
@@ -331,9 +339,22 @@ def compile_sets(names: Iterable[str], workers: int | None = None, stream=None,
             _compile_in_workers(todo, min(workers, len(todo)), progress, nice)
             for kernel_set in todo if load else ():
                 exercise(kernel_set.name)
+        unkept = len(missing((kernel_set.name for kernel_set in todo), loaded=False))
     finally:
-        progress.close()
+        progress.close(unkept)
     return [kernel_set.name for kernel_set in todo]
+
+
+def not_kept() -> str:
+    """Why compiled kernels may not have been kept, in words: where the cache is and what room its disk has."""
+    from .kernels.cache import cache_root
+
+    root = cache_root()
+    try:
+        free = f"{shutil.disk_usage(root).free / 2 ** 20:.0f} MiB free on its disk"
+    except OSError as error:
+        free = error.strerror
+    return f"the kernel cache {root} could not be written: {free}"
 
 
 def _compile_in_workers(todo: list[KernelSet], workers: int, progress: Progress, nice: int) -> None:

@@ -370,19 +370,32 @@ class Wall(_Replaceable):
         set_(self, "normal", (nx / norm, ny / norm))
         set_(self, "position", finite(f"wall {self.name!r} position", self.position))
         choice(f"wall {self.name!r} mode", self.mode, WALL_MODES)
+        if not isinstance(self.load, Load):
+            raise ParameterError(f"wall {self.name!r} load", self.load, "a Load")
         set_(self, "velocity", finite(f"wall {self.name!r} velocity", self.velocity))
         set_(self, "tangential_velocity", finite(f"wall {self.name!r} tangential_velocity", self.tangential_velocity))
         if self.mode == "force":
             set_(self, "mass", positive(f"wall {self.name!r} mass", self.mass))
+            check_wall_load(self.name, self.load)
         else:
             set_(self, "mass", nonnegative(f"wall {self.name!r} mass", self.mass))
-        if not isinstance(self.load, Load):
-            raise ParameterError(f"wall {self.name!r} load", self.load, "a Load")
         if self.disks is not None:
             first, stop = pair(f"wall {self.name!r} disks", self.disks, whole)
             if not first < stop:
                 raise ParameterError(f"wall {self.name!r} disks", self.disks, "(first, stop) with first < stop")
             set_(self, "disks", (first, stop))
+
+
+def check_wall_load(name: str, load: Load) -> None:
+    """Refuse a force-controlled wall's load that pulls at any time of its cycle: a wall pushes on the
+    disks (``base >= 0`` and ``base + 2 amplitude >= 0``)."""
+    if load.base < 0.0:
+        raise ParameterError(f"wall {name!r} load.base", load.base, "a load that never pulls: base >= 0 (a wall pushes "
+                                                                   "on the disks)")
+    if load.base + 2.0 * load.amplitude < 0.0:
+        raise ParameterError(f"wall {name!r} load.amplitude", load.amplitude,
+                             f"a load that never pulls: base + 2 amplitude >= 0, so at least {-load.base / 2:g} with "
+                             f"base = {load.base:g} (a wall pushes on the disks)")
 
 
 def box_walls(x0: float, x1: float, y0: float, y1: float, loads: dict[str, Load] | None = None,

@@ -29,7 +29,7 @@ from .kernels.contacts import TALLY_SIZE
 from .kernels.laws import D0, F0, GAMMA_T, KN, KR, KT, LAW_SIZE, MU, MU_R, ZETA, ZETA_R
 from .kernels.normal import largest_stiffness
 from .params import (CELL_CONTROLS, NORMAL, TANGENTIAL, WALL_MODES, ContactLaw, Integration, Load, PeriodicCell, Wall,
-                     finite, positive, whole)
+                     check_wall_load, finite, positive, whole)
 from .state import (CELL_NONE, CELL_STRESS, KIND_KINEMATIC, KIND_NAMES, STATUS_NAMES, STATUS_NONE, STATUS_SLIDE_NEG,
                     STATUS_SLIDE_POS, STATUS_STICK, WALL_VELOCITY, CellState, ContactTable, ParticleState, RunOptions,
                     WallState, Workspace)
@@ -41,6 +41,15 @@ Z_MAX = 6
 CHECKPOINT_STEPS = 2000
 #: fewer disks than this run on one thread (a parallel launch costs more than it saves)
 PARALLEL_MIN_DISKS = 1000
+#: a walled or periodic system whose disks, walls or cell reach this many times its size at the start
+#: from where they began is diverging (a wall or cell running away): the run stops
+RUNAWAY = 1000.0
+#: a load's period must hold at least this many time steps (fewer sample it at an alias of itself)
+MIN_LOAD_PERIOD_STEPS = 20
+#: a run whose energy balance drifts by more than this share of the energy it turned over is told so
+#: (``granlab run``: on standard error and in the run file's notes); the engine's own error at its default
+#: step is a few 10⁻⁴ (docs/engine.md, "Energy")
+UNBOOKED_SHARE = 0.01
 
 
 def law_vector(law: ContactLaw) -> np.ndarray:
@@ -142,6 +151,14 @@ class EnergyBudget:
     @property
     def balance(self) -> float:
         return self.kinetic + self.stored + self.gravity + self.dissipated - self.work_in
+
+    def unbooked_share(self, start: EnergyBudget) -> float:
+        """The drift of :attr:`balance` since ``start``, as a share of the energy turned over: the kinetic
+        and stored energy at ``start``, and what has been dissipated, done as work and gained or lost
+        to gravity since (0 where that is 0)."""
+        scale = (abs(start.kinetic) + abs(start.stored) + abs(self.dissipated - start.dissipated)
+                 + abs(self.work_in - start.work_in) + abs(self.gravity - start.gravity))
+        return (self.balance - start.balance) / scale if scale > 0.0 else 0.0
 
     def as_dict(self) -> dict:
         values = {name: getattr(self, name) for name in self.__dataclass_fields__}
@@ -330,7 +347,7 @@ class Simulation:
         self.integration = integration
         self.cell_params = cell
         self.wall_params = tuple(walls)
-        self._check_geometry(walls, cell)
+        self._check_geometry(walls, cell, particles)
         self.walls = WallState(tuple(walls), particles.count)
         if check_initial_overlap:
             self._check_disks_inside_walls()
@@ -341,6 +358,8 @@ class Simulation:
         self._step_origin = 0
         self._law_vector = law_vector(law)
         self._dt = self._choose_dt(law, integration.dt)
+        self._start_extent = self._extent()
+        self._start_walls = self.walls.offset.copy()
         self.skin = integration.skin if integration.skin is not None else 0.2 * float(particles.radius.mean())
         n = particles.count
         capacity = 8 * n + 64
@@ -364,7 +383,14 @@ class Simulation:
 
     # ------------------------------------------------------------------ set-up checks
     @staticmethod
-    def _check_geometry(walls, cell):
+    def _check_geometry(walls, cell, particles):
+        if cell is not None and particles.count:
+            for axis in range(2):
+                widest = 2.0 * float(particles.radius.max())
+                if cell.periodic[axis] and widest >= cell.lengths[axis]:
+                    raise ParameterError(f"cell length along {'xy'[axis]}", cell.lengths[axis],
+                                         f"more than the widest disk's diameter {widest:g} (a disk as wide as its "
+                                         "periodic cell would overlap its own image)")
         for wall in walls:
             if not isinstance(wall, Wall):
                 raise ParameterError("walls", type(wall).__name__, "Wall objects")
@@ -390,11 +416,56 @@ class Simulation:
     def _choose_dt(self, law: ContactLaw, dt: float | None) -> float:
         bound = self._bound(law)
         if dt is None:
-            return self.integration.dt_safety * bound
-        if dt > bound and np.any(self.particles.inv_mass > 0):
+            dt = self.integration.dt_safety * bound
+        elif dt > bound and np.any(self.particles.inv_mass > 0):
             raise ParameterError("dt", dt, f"a time step at most the stability bound {bound:.6g} "
                                            "(see engine.simulation.stability_bound)")
+        for m in range(self.walls.count):
+            if self.walls.load[m, 2] > 0.0:  # a cyclic load (its angular frequency)
+                self._check_load_period(self.walls.names[m], float(f"{2.0 * math.pi / self.walls.load[m, 2]:.12g}"), dt)
         return float(dt)
+
+    def _check_load_period(self, name: str, period: float, dt: float) -> None:
+        """Refuse a cyclic load on wall ``name`` of fewer than MIN_LOAD_PERIOD_STEPS steps of ``dt``: the steps
+        would sample it far apart on its cycle, at an alias of its period."""
+        if period < MIN_LOAD_PERIOD_STEPS * dt:
+            raise ParameterError(f"wall {name!r} load.period", period,
+                                 f"at least {MIN_LOAD_PERIOD_STEPS} time steps of {dt:.4g}, "
+                                 f"{MIN_LOAD_PERIOD_STEPS * dt:.4g} (or inf for a constant load)")
+
+    def _extent(self) -> tuple[np.ndarray, float]:
+        """Where the system is: the disks' centre, and its size (the domain's longer side, at least a
+        diameter)."""
+        position = self.particles.position
+        centre = position.mean(axis=0) if len(position) else np.zeros(2)
+        size = float(np.max(domain_lengths(self.cell.length, self.walls.names, self.walls.offset, position,
+                                           self.particles.radius), initial=0.0))
+        return centre, max(size, 2.0 * float(self.particles.radius.max(initial=0.0)))
+
+    def _runaway(self) -> str | None:
+        """Why the run is diverging though every number is finite, or None: a disk, a wall or a periodic
+        length of a walled or periodic system has gone RUNAWAY times the system's starting size from
+        where it began (a gas in open space may spread as far as it likes)."""
+        if not self.walls.count and self.cell_params is None:
+            return None
+        (centre, size), limit = self._start_extent, RUNAWAY * self._start_extent[1]
+        lengths = self.cell.length[self.cell.length > 0]
+        if lengths.size and lengths.max() > limit:
+            return (f"the periodic cell's length reached {lengths.max():.3g}, more than {RUNAWAY:g} times the system's "
+                    f"size at the start ({size:.3g}): the cell is running away (a stress-controlled cell too light "
+                    f"for its stress, or a stress far from the packing's)")
+        walls = np.abs(self.walls.offset - self._start_walls) if self.walls.count else np.zeros(1)
+        if walls.max() > limit:
+            m = int(np.argmax(walls))
+            return (f"wall {self.walls.names[m]!r} moved {walls[m]:.3g} from where it began, more than {RUNAWAY:g} "
+                    f"times the system's size at the start ({size:.3g}): it is running away (a force-controlled wall "
+                    f"too light for its load, or a load far from the packing's)")
+        distance = np.abs(self.particles.position - centre).max(axis=1) if self.particles.count else np.zeros(1)
+        if distance.max() > limit:
+            i = int(np.argmax(distance))
+            return (f"disk {i} is {distance[i]:.3g} from the system's centre at the start, more than {RUNAWAY:g} times "
+                    f"the system's size there ({size:.3g}): it has run off, through a wall or with a cell running away")
+        return None
 
     def _check_disks_inside_walls(self):
         """The walls' part of :meth:`_check_initial_overlap`, before any table is made: a large
@@ -512,7 +583,8 @@ class Simulation:
         4. gravity and applied loads; second half kick; energy tallies; divergence checks
            (NaN, an overlap above ``max_overlap``); prediction for the rebuild test.
 
-        A diverging run raises :class:`DivergenceError` and the simulation is restored to
+        After each block of steps a walled or periodic system that is running away (:meth:`_runaway`)
+        is diverging too. A diverging run raises :class:`DivergenceError` and the simulation is restored to
         its state before the block of steps that failed (at most ``CHECKPOINT_STEPS`` earlier).
         """
         remaining = whole("n_steps", n_steps, 0)
@@ -528,9 +600,9 @@ class Simulation:
                     self.workspace.flags[k_integrate.FLAG_REBUILD] = 1
                     remaining -= done
                     continue
-                if code != k_integrate.CODE_OK:
+                reason = self._failure_reason(code) if code != k_integrate.CODE_OK else self._runaway()
+                if reason is not None:
                     failed_step = self.step
-                    reason = self._failure_reason(code)
                     self._restore(saved)
                     raise DivergenceError(reason, failed_step, self.time)
                 remaining -= done
@@ -666,6 +738,8 @@ class Simulation:
         m = self.wall_index(name)
         if not isinstance(load, Load):
             raise ParameterError(f"wall {name!r} load", load, "a Load")
+        check_wall_load(name, load)
+        self._check_load_period(name, load.period, self.dt)
         self.walls.load[m] = (load.base, load.amplitude, load.angular_frequency, load.phase)
 
     def set_wall_velocity(self, name: str, velocity: float, tangential_velocity: float = 0.0) -> None:

@@ -374,3 +374,27 @@ def test_what_a_command_will_take_is_said_and_refused_before_any_work(tmp_path, 
     said = capsys.readouterr().err.splitlines()
     assert said[:2] == ["building 900 disks (up to 1.6 MB of memory)", f"writing 11 frames to {tmp_path / 'run.h5'} "
                                                                         "(up to 2 MB)"]
+
+
+def test_a_run_whose_energy_balance_drifts_says_so_on_stderr_and_in_its_run_file(tmp_path, monkeypatch, capsys):
+    """The engine's own drift at the default step is a few 10^-4 of the energy turned over: a run told
+    to warn above 10^-6 warns, on standard error and in the run file's notes, which ``granlab info``
+    prints; the threshold as shipped (1 %) stays silent."""
+    from granlab.app.commands import main
+    from granlab.engine import simulation
+
+    scene = tmp_path / "pair.toml"
+    scene.write_text(PAIR.replace("normal_stiffness = 1e4", "normal_stiffness = 1e4\nfriction = 1e6")
+                     .replace("vx = 1.0", "vx = 1.0\nvy = 0.4\nomega = 3.0").replace("dt = 1e-4", "dt = 2e-3"))
+    assert main(["run", str(scene), "--out", str(tmp_path / "quiet.h5")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    monkeypatch.setattr(simulation, "UNBOOKED_SHARE", 1e-6)
+    assert main(["run", str(scene), "--out", str(tmp_path / "told.h5")]) == 0
+    warning = capsys.readouterr().err.strip().splitlines()[-1]
+    assert re.fullmatch(r"granlab run: warning: the energy balance drifted by [+-][0-9.e-]+ % of the energy the run "
+                        r"turned over, more than 0.0001 %: the time step is too large for this run \(a smaller "
+                        r"simulation.dt_safety or dt\)", warning), warning
+    assert main(["info", str(tmp_path / "told.h5")]) == 0
+    assert f"  note: {warning.removeprefix('granlab run: warning: ')}" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "quiet.h5")]) == 0
+    assert "note:" not in capsys.readouterr().out

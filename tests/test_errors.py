@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from granlab.engine import (ContactLaw, DivergenceError, Integration, ParameterError, ParticleState, SceneError,
-                            Simulation, Wall, box_walls)
+from granlab.engine import (ContactLaw, DivergenceError, Integration, Load, ParameterError, ParticleState,
+                            PeriodicCell, SceneError, Simulation, Wall, box_walls)
 from granlab.engine.io.scene import parse_scene
 
 
@@ -222,3 +222,71 @@ def test_a_friction_coefficient_has_one_rule_and_each_context_says_what_it_adds(
     with pytest.raises(ParameterError) as raised:
         make()
     assert message in str(raised.value)
+
+
+CYCLED_BOX = """
+[simulation]
+duration = 1.0
+[box]
+x = [0.0, 6.0]
+y = [0.0, 6.0]
+wall_mass = 1.0
+[box.loads.top]
+base = {base}
+amplitude = 0.1
+period = {period}
+[[particles.gas]]
+count = 20
+radius_min = 0.3
+radius_max = 0.5
+seed = 1
+"""
+
+
+def test_nonsense_a_scene_could_hold_is_refused_in_one_line():
+    """A load period of 10^-6 (and 10^-300) with dt = 1.1e-3 sampled the load hundreds of periods apart, a
+    load base of -10^149 pulled the wall away, and a disk wider than its periodic cell overlapped its own
+    image: each ran to an exit 0."""
+    for period in (1e-6, 1e-300):
+        with pytest.raises(SceneError, match=r"scene cannot start: wall 'top' \(\[box\] x, y\) load.period = "
+                                             rf"{period:g} is not allowed: at least 20 time steps of 0.00114"):
+            parse_scene(CYCLED_BOX.format(base=1.0, period=period)).build()
+    parse_scene(CYCLED_BOX.format(base=1.0, period=0.03)).build()  # 26 steps: a load it can follow
+    with pytest.raises(SceneError, match=r"^scene: \[box.loads.top\] wall 'top' load.base = -1e\+149 is not allowed: a load "
+                                         r"that never pulls: base >= 0 \(a wall pushes on the disks\)$"):
+        parse_scene(CYCLED_BOX.format(base=-1e149, period=10.0))
+    with pytest.raises(ParameterError, match=r"wall 'top' load.amplitude = -0.3 is not allowed: a load that never "
+                                             r"pulls: base \+ 2 amplitude >= 0, so at least -0.25 with base = 0.5"):
+        Wall((0.0, -1.0), -6.0, "force", mass=1.0, load=Load(base=0.5, amplitude=-0.3), name="top")
+    Wall((0.0, -1.0), -6.0, "force", mass=1.0, load=Load(base=0.5, amplitude=-0.25), name="top")  # down to 0
+    Wall((0.0, -1.0), -6.0, "velocity", load=Load(base=-1.0), name="top")  # a load it does not feel
+    sim = parse_scene(CYCLED_BOX.format(base=1.0, period=10.0)).build()
+    with pytest.raises(ParameterError, match="load.period = 0.001 is not allowed: at least 20 time steps"):
+        sim.set_wall_load("top", Load(base=1.0, amplitude=0.1, period=1e-3))
+    assert sim.walls.load[sim.wall_index("top"), 2] == pytest.approx(2 * math.pi / 10.0)  # the last good load
+    with pytest.raises(ParameterError, match=r"cell length along x = 0.9 is not allowed: more than the widest disk's "
+                                             r"diameter 1 \(a disk as wide as its periodic cell would overlap its own "
+                                             r"image\)"):
+        Simulation(ParticleState([[0.4, 5.0]], [0.5]), ContactLaw(), cell=PeriodicCell((0.9, 10.0)))
+
+
+def test_a_cell_running_away_stops_the_run_with_the_last_good_state():
+    """A periodic cell under a stress of 10^6 with a generalised mass of 10^-6 blew up to disk positions
+    of 6·10^11 and the run ended with exit 0."""
+    rng = np.random.default_rng(1)
+    positions = np.column_stack([np.tile(np.arange(5), 5), np.repeat(np.arange(5), 5)]) * 2.0 + 1.0
+    particles = ParticleState(positions + rng.uniform(-0.1, 0.1, (25, 2)), rng.uniform(0.4, 0.6, 25))
+    cell = PeriodicCell((10.0, 10.0), control=("stress", "stress"), stress=(1e6, 1e6), mass=1e-6)
+    sim = Simulation(particles, ContactLaw(normal_stiffness=1e3, tangential_stiffness=1e3, friction=0.3,
+                                           damping_ratio=0.2), cell=cell)
+    before = sim.particles.position.copy()
+    with pytest.raises(DivergenceError, match=r"more than 1000 times the system's size"):
+        sim.run(20000)
+    assert sim.step == 0 and np.array_equal(sim.particles.position, before)
+
+
+def test_a_gas_spreading_in_open_space_is_no_divergence():
+    sim = Simulation(ParticleState([[0.0, 0.0], [3.0, 0.0]], [0.5, 0.5], velocity=[[-100.0, 0.0], [100.0, 0.0]]),
+                     ContactLaw(), Integration(dt=1e-3))
+    sim.run_for(10.0)  # 1000 m apart after 5 000 sizes: no box, so nothing runs away
+    assert sim.particles.position[1, 0] - sim.particles.position[0, 0] > 1999.0

@@ -221,3 +221,26 @@ def test_a_copy_of_the_sources_finds_the_kernels_the_installed_ones_compiled(tmp
     """)
     subprocess.run([sys.executable, "-c", script], env={**os.environ, "PYTHONPATH": str(tmp_path)}, check=True,
                    cwd=tmp_path, timeout=120)
+
+
+def test_a_compile_whose_kernels_cannot_be_kept_says_so_and_exits_2(tmp_path):
+    """Into a cache that takes no file of more than 4 KiB (a full disk's refusal, by RLIMIT_FSIZE: Python
+    ignores SIGXFSZ, so a write past it fails as ENOSPC would), ``granlab compile`` said "compiled in 3 s
+    (kept for the next runs)" and exited 0, and the next run compiled from nothing."""
+    import resource
+
+    def limit_files():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+
+    env = {**os.environ, "GRANLAB_CACHE_DIR": str(tmp_path / "cache")}
+    command = [sys.executable, "-m", "granlab.app.commands", "compile", "--only", "state"]
+    full = subprocess.run(command, capture_output=True, text=True, env=env, preexec_fn=limit_files, timeout=300)
+    assert full.returncode == 2, full.stderr
+    lines = full.stderr.splitlines()
+    assert "compiled in" in lines[-2] and "but 1 of 1 sets could not be kept (the kernel cache" in lines[-2]
+    assert lines[-1].startswith("granlab compile: error: 1 of 1 kernel sets are not in the kernel cache after "
+                                "compiling them (state): the kernel cache ")
+    room = subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
+    assert room.returncode == 0 and "compiled in" in room.stderr and "kept for the next runs" in room.stderr
+    again = subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
+    assert again.returncode == 0 and again.stdout.startswith("every kernel set was compiled before (1)")

@@ -24,7 +24,8 @@ def add(commands) -> None:
 def _compile(args) -> dict:
     import numba
 
-    from granlab.engine.compilation import KERNEL_SETS, compile_sets
+    from granlab.engine.compilation import KERNEL_SETS, compile_sets, missing, not_kept
+    from granlab.engine.errors import GranLabError
     from granlab.engine.kernels.cache import cache_root
 
     start = time.perf_counter()
@@ -32,6 +33,11 @@ def _compile(args) -> dict:
     if numba.config.NUMBA_NUM_THREADS < 2:  # one core: nothing runs the several-thread code
         names = [name for name in names if not name.endswith("-threads")]
     compiled = compile_sets(names, workers=args.workers)
+    unkept = missing(names, loaded=False)
+    if unkept:
+        raise GranLabError(f"{len(unkept)} of {len(names)} kernel sets are not in the kernel cache after compiling "
+                           f"them ({', '.join(kernel_set.name for kernel_set in unkept)}): {not_kept()}; the next run "
+                           "compiles them again")
     return {"compiled": compiled, "already": [name for name in names if name not in compiled],
             "seconds": time.perf_counter() - start, "cache": str(cache_root())}
 

@@ -23,6 +23,8 @@ def _print_info(result: dict) -> None:
     if "energy_last" in result:
         e = result["energy_last"]
         print(f"  last energies: kinetic {e['kinetic']:.6g}, stored {e['stored']:.6g}, balance {e['balance']:.6g}")
+    for note in result.get("notes", []):
+        print(f"  note: {note}")
     if result.get("protocol"):
         from granlab.engine.io.jsonsafe import jsonable
 

@@ -37,7 +37,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
     from granlab.engine.io.outputs import check_output
     from granlab.engine.io.scene import load_scene, parse_scene
     from granlab.engine.params import positive
-    from granlab.engine.simulation import PARALLEL_MIN_DISKS
+    from granlab.engine.simulation import PARALLEL_MIN_DISKS, UNBOOKED_SHARE
 
     positive("--checkpoint-seconds", checkpoint_seconds, allow_inf=True)
     check_backend(backend)
@@ -85,6 +85,7 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
                 writer.write_checkpoint(sim)
                 last_checkpoint.update(frames=0, time=time.perf_counter())
 
+    start_energy = sim.energy()
     try:
         record()
         done = 0
@@ -107,6 +108,14 @@ def run_scene(name: str | None, out: str | None = None, frame_every: int | None 
                 if progress is not None and done < total:
                     progress(done, total, sim)
             record()
+        unbooked = sim.energy().unbooked_share(start_energy)
+        if abs(unbooked) > UNBOOKED_SHARE:
+            note = (f"the energy balance drifted by {100 * unbooked:+.3g} % of the energy the run turned over, more "
+                    f"than {100 * UNBOOKED_SHARE:g} %: the time step is too large for this run (a smaller "
+                    f"simulation.dt_safety or dt)")
+            print(f"granlab run: warning: {note}", file=sys.stderr, flush=True)
+            if writer is not None:
+                writer.write_note(note)
         if writer is not None:
             writer.write_checkpoint(sim)
     finally:

@@ -272,6 +272,7 @@ class RunWriter:
         time_dependent(cell, "control", (2,), np.int8)
         time_dependent(cell, "target_stress", (2,))
         time_dependent(observables, "law", (), h5py.string_dtype())
+        _extendable(observables, "notes", (), h5py.string_dtype(), 16)
         cycles = observables.create_group("cycles")
         for name in CYCLE_FIELDS:
             _extendable(cycles, name, (), np.int64 if name in ("cycle", "step") else np.float64)
@@ -405,6 +406,13 @@ class RunWriter:
         self._cycles.append((cycle, step, time, length_x, length_y, np.array(wall_position, dtype=float)))
         if len(self._cycles) >= 100:
             self._write_cycles()
+
+    @_write
+    def write_note(self, text: str) -> None:
+        """Append a line to the run's notes (``observables/notes``: what a reader should know of the
+        run, such as an energy balance that drifted); flush."""
+        append_row(self._get("observables/notes"), text)
+        self.file.flush()
 
     @_write
     def write_series(self, name: str, rows: np.ndarray) -> None:
@@ -964,6 +972,9 @@ def summary(path: str | Path) -> dict:
             info["energy_last"] = {name: float(values[-1]) for name, values in energy.items()}
         if "observables/cycles/cycle" in f:
             info["cycles"] = int(f["observables/cycles/cycle"].shape[0])
+        if "observables/notes" in f:
+            info["notes"] = [note.decode(errors="replace") if isinstance(note, bytes) else str(note)
+                             for note in f["observables/notes"][()]]
         info["checkpoint_step"] = checkpoint_step(f)
     return info
 

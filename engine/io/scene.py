@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import costs, generate
 from ..errors import ParameterError, SceneError
-from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls
+from ..params import ContactLaw, Integration, Load, PeriodicCell, Wall, box_walls, check_wall_load
 from ..simulation import Simulation
 from ..state import HUGE, ParticleState
 from .inputs import require_file
@@ -274,10 +274,14 @@ def _threads(sim) -> int | None:
     return threads
 
 
-def _load(table, path) -> Load:
+def _load(table, path, wall: str | None = None) -> Load:
+    """The load at ``path``; on ``wall`` (force-controlled), refused where it would pull, naming the key."""
     _keys(table, path, LOAD_KEYS)
-    return _build(path, Load, base=_number(table, "base", path), amplitude=_number(table, "amplitude", path),
+    load = _build(path, Load, base=_number(table, "base", path), amplitude=_number(table, "amplitude", path),
                   period=_number(table, "period", path), phase=_number(table, "phase", path))
+    if wall is not None:
+        _build(path, check_wall_load, name=wall, load=load)
+    return load
 
 
 def _walls(data) -> tuple[Wall, ...]:
@@ -289,7 +293,7 @@ def _walls(data) -> tuple[Wall, ...]:
         if x is None or y is None:
             raise SceneError("[box] needs x = [x0, x1] and y = [y0, y1]")
         loads_table = _keys(box.get("loads", {}), "box.loads", {"left", "right", "bottom", "top"})
-        loads = {name: _load(value, f"box.loads.{name}") for name, value in loads_table.items()}
+        loads = {name: _load(value, f"box.loads.{name}", wall=name) for name, value in loads_table.items()}
         wall_mass = _number(box, "wall_mass", "box")
         if wall_mass is not None and not wall_mass > 0:
             raise SceneError(f"box.wall_mass = {wall_mass!r} is not allowed: a positive mass (that of each wall)")
@@ -304,13 +308,14 @@ def _walls(data) -> tuple[Wall, ...]:
         if per_length is not None and (not isinstance(per_length, list) or len(per_length) != 2
                                        or not all(isinstance(n, str) for n in per_length)):
             raise SceneError(f"{path}.load_per_length_of = {_shown(per_length)} is not allowed: two wall names")
+        mode, name = _string(entry, "mode", path), _string(entry, "name", path, default=f"wall{len(walls)}")
         walls.append(_build(path, Wall, normal=_vector(entry, "normal", path), position=_number(entry, "position", path),
-                            mode=_string(entry, "mode", path), velocity=_number(entry, "velocity", path),
+                            mode=mode, velocity=_number(entry, "velocity", path),
                             tangential_velocity=_number(entry, "tangential_velocity", path),
                             mass=_number(entry, "mass", path),
-                            load=_load(entry["load"], f"{path}.load") if "load" in entry else None,
-                            load_per_length_of=tuple(per_length) if per_length else None,
-                            name=_string(entry, "name", path, default=f"wall{len(walls)}")))
+                            load=_load(entry["load"], f"{path}.load", wall=name if mode == "force" else None)
+                            if "load" in entry else None,
+                            load_per_length_of=tuple(per_length) if per_length else None, name=name))
     return tuple(walls)
 
 
