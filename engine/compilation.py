@@ -26,6 +26,8 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from . import stopping
+from .errors import GranLabError
 from .params import TANGENTIAL
 
 
@@ -281,16 +283,17 @@ class Progress:
         self.done += count
         self.show(force=True)
 
-    def close(self, unkept: int = 0) -> None:
+    def close(self, unkept: int = 0, stopped: bool = False) -> None:
         """The last line: how long it took, and whether the kernels were kept (``unkept``: sets that
-        could not be)."""
+        could not be; ``stopped``: the compile was stopped before its end)."""
         self._stop.set()
         with self._lock:
             seconds = time.monotonic() - self.start
             end = "\r\033[K" if self.stream.isatty() and not self.background else ""
             kept = f"but {unkept} of {self.total} sets could not be kept ({not_kept()}): the next run compiles them " \
                    "again" if unkept else "kept for the next runs"
-            print(f"{end}compiled in {seconds:.0f} s ({kept})", file=self.stream, flush=True)
+            done = f"compile stopped after {seconds:.0f} s" if stopped else f"compiled in {seconds:.0f} s ({kept})"
+            print(f"{end}{done}", file=self.stream, flush=True)
         if self.on_change is not None:
             self.on_change({**self.state(), "done": self.total, "current": ""})
 
@@ -315,20 +318,20 @@ def workers_for(count: int) -> int:
 
 def compile_sets(names: Iterable[str], workers: int | None = None, stream=None,
                  on_change: Callable[[dict], None] | None = None, nice: int = 0, load: bool = True,
-                 background: bool = False) -> list[str]:
+                 background: bool = False, cancel: threading.Event | None = None) -> list[str]:
     """Compile the sets of ``names`` the cache does not hold, in their order, and report it on
     ``stream`` (standard error) and to ``on_change(state)``: in ``workers`` processes side by side
     (default: one set here, more in one process a core; 0: here), raised in ``nice`` (so that a
     process going on beside them keeps its cores); with ``load``, the sets are then loaded here (a
     fraction of a second each); ``background``: a line when it starts and one when it ends, for
-    work that goes on meanwhile. Returns the names compiled."""
+    work that goes on meanwhile. ``cancel`` set stops a compile in workers (they are killed:
+    :class:`CompileCancelled`). Returns the names compiled."""
     todo = missing(names)
     if not todo:
         return []
     progress = Progress(len(todo), stream, on_change, background)
     if workers is None:
         workers = 0 if len(todo) == 1 else workers_for(len(todo))
-    unkept = 0
     try:
         if workers == 0:
             for kernel_set in todo:
@@ -336,13 +339,18 @@ def compile_sets(names: Iterable[str], workers: int | None = None, stream=None,
                 exercise(kernel_set.name)
                 progress.finished()
         else:
-            _compile_in_workers(todo, min(workers, len(todo)), progress, nice)
+            _compile_in_workers(todo, min(workers, len(todo)), progress, nice, cancel)
             for kernel_set in todo if load else ():
                 exercise(kernel_set.name)
-        unkept = len(missing((kernel_set.name for kernel_set in todo), loaded=False))
-    finally:
-        progress.close(unkept)
+    except BaseException:
+        progress.close(stopped=True)
+        raise
+    progress.close(len(missing((kernel_set.name for kernel_set in todo), loaded=False)))
     return [kernel_set.name for kernel_set in todo]
+
+
+class CompileCancelled(GranLabError):
+    """A compile in workers stopped by its ``cancel`` event (:func:`compile_sets`)."""
 
 
 def not_kept() -> str:
@@ -357,22 +365,44 @@ def not_kept() -> str:
     return f"the kernel cache {root} could not be written: {free}"
 
 
-def _compile_in_workers(todo: list[KernelSet], workers: int, progress: Progress, nice: int) -> None:
-    """Each set in a worker process, in the order of ``todo``."""
+def _compile_in_workers(todo: list[KernelSet], workers: int, progress: Progress, nice: int,
+                        cancel: threading.Event | None) -> None:
+    """Each set in a worker process, in the order of ``todo``. The workers end with this process, however
+    it ends, and at once when this one is asked to stop (:mod:`granlab.engine.stopping`), ``cancel`` is set
+    or a set fails."""
     pending, running = list(todo), {}
     context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=os.nice,
-                                                initargs=(nice,)) as pool:
+    pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_start,
+                                                  initargs=(os.getpid(), nice))
+    try:
         while pending or running:
             while pending and len(running) < workers:
                 kernel_set = pending.pop(0)
                 running[pool.submit(exercise, kernel_set.name)] = kernel_set
             progress.begin(", ".join(kernel_set.title for kernel_set in running.values()))
-            finished, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+            finished = ()
+            while not finished:
+                stopping.check()
+                if cancel is not None and cancel.is_set():
+                    raise CompileCancelled("the compile was cancelled")
+                finished, _ = concurrent.futures.wait(running, timeout=0.5,
+                                                      return_when=concurrent.futures.FIRST_COMPLETED)
             for future in finished:
                 future.result()
                 running.pop(future)
                 progress.done += 1
+    except BaseException:
+        for process in list(getattr(pool, "_processes", {}).values()):  # ProcessPoolExecutor keeps them so
+            process.kill()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _worker_start(parent: int, nice: int) -> None:
+    """A compile worker's start: it ends with process ``parent``, and yields its cores by ``nice``."""
+    stopping.die_with_parent(parent)
+    os.nice(nice)
 
 
 # ------------------------------------------------------------------------------------ announcing

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from . import stopping
 from .checkpoint import CheckpointError, check_state
 from .cuda import check_backend
 from .cuda.stepper import DeviceRun, DeviceState
@@ -592,6 +593,7 @@ class Simulation:
             self._device_run = DeviceRun(self.tangential_model_code, resident=True)
         try:
             while remaining > 0:
+                stopping.check()  # between blocks the state is a whole step
                 block = min(remaining, CHECKPOINT_STEPS)
                 saved = self._checkpoint()
                 done, code = self._advance(self.dt, block)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from . import costs
+from . import costs, stopping
 from .analysis.ratchet import (VERDICT_RULES, RatchetVerdict, deviatoric_strain, judge, ratchet_verdict,
                               share_statistics)
 from .batch import Batch
@@ -39,7 +39,8 @@ from .protocols.cyclic import CyclicLoad, run_cycles, wall_loads
 from .protocols.prepare import biaxial_law, compress
 from .simulation import stability_bound
 
-
+POLL_SECONDS = 0.2
+"""How often a study waiting for its samples looks whether it was asked to stop."""
 
 
 @dataclass(frozen=True)
@@ -449,17 +450,23 @@ def run_tasks(function, tasks: list[tuple], keys: list[str], scheduler: str | No
             futures = [client.submit(function, *task, key=key, pure=False) for task, key in zip(tasks, keys)]
             state["phase"] = "running"
             outcomes = {}
-            for done, future in enumerate(as_completed(futures), start=1):
-                try:
-                    outcomes[future.key] = future.result()
-                except Exception as error:  # a lost worker: report, go on
-                    outcomes[future.key] = error
-                else:
-                    if on_result is not None:
-                        on_result(future.key, outcomes[future.key])
-                state["done"] = done
-                if progress is not None:
-                    progress(done, len(futures), "running")
+            finishing = as_completed(futures)
+            while not finishing.is_empty():
+                stopping.check()  # a stop asked for ends the study between two samples
+                batch = finishing.next_batch(block=False)
+                if not batch:
+                    time.sleep(POLL_SECONDS)
+                for future in batch:
+                    try:
+                        outcomes[future.key] = future.result()
+                    except Exception as error:  # a lost worker: report, go on
+                        outcomes[future.key] = error
+                    else:
+                        if on_result is not None:
+                            on_result(future.key, outcomes[future.key])
+                    state["done"] += 1
+                    if progress is not None:
+                        progress(state["done"], len(futures), "running")
     finally:
         finished.set()
         if cluster is not None:

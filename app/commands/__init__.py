@@ -14,7 +14,6 @@ import json
 import os
 import signal
 import sys
-import threading
 from importlib.metadata import version
 from pathlib import Path
 
@@ -46,41 +45,33 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        if args.command == "serve":
-            return serve.serve(args)
-        if args.command == "bench":
-            bench.choose_handler(args)
-    except GranLabError as error:
-        print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr)
-        return 2
-    return run_args(args)
+    from granlab.engine.stopping import stop_on_signals
 
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised as Ctrl-C's KeyboardInterrupt is, so that a command stopped either way
-    unwinds: its hidden part files are removed and its run file closed whole."""
-
-
-def _terminate(signum, frame):
-    raise Terminated()
+    with stop_on_signals():  # a signal from here on asks for a stop (engine/stopping.py)
+        args = build_parser().parse_args(argv)
+        try:
+            if args.command == "serve":
+                return serve.serve(args)
+            if args.command == "bench":
+                bench.choose_handler(args)
+        except GranLabError as error:
+            print(f"granlab {args.command}: error: {one_line(str(error))}", file=sys.stderr)
+            return 2
+        return run_args(args)
 
 
 def run_args(args) -> int:
     """Run a parsed command: print its result (or one JSON object); errors exit with status 2,
-    Ctrl-C with 130 and SIGTERM with 143, each after one line on standard error."""
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    Ctrl-C with 130 and SIGTERM with 143, each after one line on standard error. A signal asks the
+    work to stop where what it writes is whole (:mod:`granlab.engine.stopping`, set up by :func:`main`)."""
+    from granlab.engine.stopping import Stopped
+
     try:
         result = _handle(args)
     except KeyboardInterrupt as stop:
-        terminated = isinstance(stop, Terminated)
-        print(f"granlab {args.command}: stopped by {'SIGTERM' if terminated else 'Ctrl-C'}", file=sys.stderr)
-        return 143 if terminated else 130
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous)
+        stopped = stop if isinstance(stop, Stopped) else Stopped(signal.SIGINT)
+        print(f"granlab {args.command}: stopped by {stopped.by}", file=sys.stderr)
+        return stopped.exit_status
     if isinstance(result, GranLabError):
         print(f"granlab {args.command}: error: {one_line(str(result))}", file=sys.stderr)
         return 2

@@ -58,13 +58,13 @@ def _reproduce(args) -> dict:
     try:
         result = run_reproduction(reproduction, scheduler=args.scheduler, workers=args.workers,
                                   progress=None if args.json else TextProgress(), folder=folder)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         if folder is None:
             raise
         total = reproduction.samples * len(reproduction.cases)
         print(f"\ninterrupted: {len(finished_samples(folder))} of {total} samples are in {folder}; go on with "
               f"granlab reproduce {args.table} --resume {folder}", file=sys.stderr)
-        raise SystemExit(130) from None
+        raise SystemExit(getattr(stop, "exit_status", 130)) from None
     if result["failed"] and len(result["failed"]) == len(result["samples"]):
         first = result["failed"][0]
         raise GranLabError(f"every sample failed ({len(result['failed'])} of {len(result['failed'])}); seed "

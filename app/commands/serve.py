@@ -24,7 +24,7 @@ def add(commands) -> None:
 
 
 def serve(args) -> int:
-    """Check the options, then serve until stopped."""
+    """Check the options, then serve until stopped; the exit status (130 after Ctrl-C, 143 after SIGTERM)."""
     from granlab.app.lab.options import HISTORY_MIB, PAUSE_WITHOUT_PAGES, check_serve_options
 
     limits = {"history_mib": HISTORY_MIB if args.history_mib is None else args.history_mib,
@@ -34,6 +34,5 @@ def serve(args) -> int:
     from granlab.app.lab.server import serve as serve_lab
 
     changes = {key: getattr(args, key) for key in ("particles", "seed") if getattr(args, key) is not None}
-    serve_lab(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
-              **limits, **changes)
-    return 0
+    return serve_lab(host=args.host, port=args.port, data_dir=args.data_dir, preset=args.preset, tokens=args.tokens,
+                     **limits, **changes)

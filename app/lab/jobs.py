@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import itertools
 import multiprocessing
+import os
 import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from granlab.engine.errors import GranLabError
+from granlab.engine.stopping import die_with_parent
 
 SPAWN = multiprocessing.get_context("spawn")
 POLL_SECONDS = 0.1
@@ -120,7 +122,7 @@ class Jobs:
 
     def _run(self, job: Job, function: Callable, args: tuple) -> JobOutcome:
         ours, theirs = SPAWN.Pipe(duplex=False)
-        process = SPAWN.Process(target=_child, args=(theirs, function, args), name=f"granlab-{job.kind}",
+        process = SPAWN.Process(target=_child, args=(theirs, os.getpid(), function, args), name=f"granlab-{job.kind}",
                                 daemon=True)
         try:
             process.start()
@@ -165,8 +167,10 @@ def _exit_text(code: int | None) -> str:
     return f"exit code {code}"
 
 
-def _child(conn, function: Callable, args: tuple) -> None:
-    """The job's process: run ``function``, send its progress and its outcome."""
+def _child(conn, parent: int, function: Callable, args: tuple) -> None:
+    """The job's process: run ``function``, send its progress and its outcome; it ends with the lab
+    (process ``parent``), however the lab ends."""
+    die_with_parent(parent)
 
     def report(fraction: float) -> None:
         conn.send(("progress", min(1.0, max(0.0, float(fraction)))))

@@ -42,6 +42,7 @@ from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST, _env
 from websockets.http11 import Request
 
+from granlab.engine import stopping
 from granlab.engine.compilation import announced, compile_sets, missing, step_sets
 from granlab.engine.errors import GranLabError
 from granlab.engine.io.export.html import DRAWING
@@ -71,6 +72,8 @@ MALLOPT = getattr(LIBC, "mallopt", None)
 M_ARENA_MAX = -8
 # the frames kept for saves and movies may take at most half this machine's memory
 TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
+STARTER_STOP_SECONDS = 2.0
+"""How long a stopping lab waits for its compile workers to be killed."""
 # a phone lays the page out at its own width (without this, as a 980-pixel desktop page shrunk)
 PAGE_TEMPLATE = _env.from_string('{% extends base %}{% block preamble %}{{ super() }}'
                                  '<meta name="viewport" content="width=device-width, initial-scale=1">{% endblock %}')
@@ -182,11 +185,13 @@ class Lab:
                       kernel_sets) -> None:
         first, later = kernel_sets
         try:
-            compile_sets(first, on_change=self.starting.update)
+            compile_sets(first, on_change=self.starting.update, cancel=self._stop)
             with announced():  # what the preset uses beyond the sets, if anything
                 engine = LabEngine(data_dir, preset, wait_for_tab=True, history_mib=history_mib,
                                    pause_without_pages=pause_without_pages, **changes)
         except Exception as error:  # noqa: BLE001 (shown on every page and in the terminal)
+            if self._stop.is_set():  # the lab is stopping: its compile was cancelled
+                return
             self.starting.update(state="failed", error=f"{type(error).__name__}: {error}")
             print(f"granlab serve: error: the engine did not start: {self.starting['error']}", file=sys.stderr,
                   flush=True)
@@ -196,7 +201,7 @@ class Lab:
         self.engine = engine
         self._ready.set()
         with contextlib.suppress(Exception):  # a choice not compiled here compiles when chosen
-            compile_sets(later, workers=1, nice=10, load=False, background=True)
+            compile_sets(later, workers=1, nice=10, load=False, background=True, cancel=self._stop)
 
     def wait_ready(self, timeout: float | None = None) -> bool:
         """Whether the engine runs, waiting up to ``timeout`` seconds for it."""
@@ -306,17 +311,25 @@ class Lab:
         self._scene_thread.start()
         self.server.start()
 
-    def run_forever(self) -> None:
+    def run_forever(self) -> int:
+        """Serve until SIGTERM or Ctrl-C, which stop the server's loop; then stop the engine, the scene and
+        any compile in workers. Returns the exit status: 0, or 130 (Ctrl-C) or 143 (SIGTERM)."""
         self.start()
-        try:
-            self.server.io_loop.start()
-        except KeyboardInterrupt:
-            pass
-        finally:
-            self.stop()
+        loop = self.server.io_loop
+        with stopping.stop_on_signals(lambda signum: loop.add_callback_from_signal(loop.stop)):
+            try:
+                loop.start()
+            except KeyboardInterrupt:  # a stop raised where the loop was (it did not stop in time)
+                pass
+            finally:
+                self.stop()
+            signum = stopping.asked()
+        return 128 + signum if signum else 0
 
     def stop(self) -> None:
         self._stop.set()
+        if self._starter.is_alive():  # a compile in workers: they are killed within half a second
+            self._starter.join(STARTER_STOP_SECONDS)
         if self.engine is not None:
             self.engine.stop()
         self.scene.close()
@@ -331,16 +344,16 @@ def _free_port(host: str) -> int:
 
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
           tokens: bool = False, history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES,
-          **changes) -> None:
-    """Start the lab and serve until interrupted (prints the URL, or with tokens the presenter's and
-    the viewers' URLs; any host but this machine's loopback serves with tokens). ``changes``:
-    settings of the first preset (e.g. ``particles=5600``)."""
+          **changes) -> int:
+    """Start the lab and serve until stopped (prints the URL, or with tokens the presenter's and
+    the viewers' URLs; any host but this machine's loopback serves with tokens); returns the exit
+    status (:meth:`Lab.run_forever`). ``changes``: settings of the first preset (e.g. ``particles=5600``)."""
     check_serve_options(host, port, data_dir, history_mib, pause_without_pages)
     with claimed_data_folder(data_dir):  # one lab a folder: its presenter's address is there
-        _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes)
+        return _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes)
 
 
-def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes) -> None:
+def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes) -> int:
     logging.getLogger("granlab.lab").setLevel(logging.INFO)
     logging.getLogger("granlab.lab").addHandler(logging.StreamHandler(sys.stderr))
     tokens = tokens or host not in LOCAL_HOSTS
@@ -361,7 +374,10 @@ def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_page
     if lab.compiles:
         print("the first start compiles the simulation's kernels (the page shows how far; `granlab compile` does it "
               "ahead of time)", flush=True)
-    lab.run_forever()
+    status = lab.run_forever()
+    if status:
+        print(f"granlab serve: stopped by {stopping.SIGNALS.get(status - 128, 'a signal')}", file=sys.stderr, flush=True)
+    return status
 
 
 PRESENTER_FILE = ".presenter-address"

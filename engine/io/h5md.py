@@ -39,7 +39,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .. import __version__
+from .. import __version__, stopping
 from ..checkpoint import HUGE, CheckpointError
 from ..costs import free_bytes
 from ..errors import GranLabError, OutputError, WriteFailed, one_line
@@ -197,7 +197,7 @@ def _reserve(sim: Simulation) -> int:
 
 def _write(method):
     """A write of a :class:`RunWriter`: an OS error ends the writer with :class:`WriteFailed`, and
-    no later call touches its file."""
+    no later call touches its file; a stop asked for waits until it is whole."""
     @functools.wraps(method)
     def write(self, *args, **kwargs):
         if self.failed is not None:
@@ -206,7 +206,8 @@ def _write(method):
             short = self._short_of_room()
             if short:
                 raise OSError(errno.ENOSPC, short)
-            return method(self, *args, **kwargs)
+            with stopping.shielded():  # a frame or checkpoint is written whole, a late stop or not
+                return method(self, *args, **kwargs)
         except (OSError, RuntimeError) as error:
             reason = failed_write_reason(error) or str(error)
             kept = (f"granlab run --resume {str(self.path)!r} goes on from its last checkpoint (step "
@@ -484,10 +485,11 @@ class RunWriter:
         return None
 
     def close(self) -> None:
-        if self.failed is None and self.file.id.valid:
-            self._write_cycles()
-            self.file.close()
-        self._writing.close()
+        with stopping.shielded():  # closed whole, a late stop or not
+            if self.failed is None and self.file.id.valid:
+                self._write_cycles()
+                self.file.close()
+            self._writing.close()
 
     def __enter__(self) -> "RunWriter":
         return self

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from granlab.engine import stopping
 from granlab.engine.errors import ParameterError
 from granlab.engine.frames import FrameData, build_frame
 from granlab.engine.io import h5md as run_files
@@ -83,7 +84,8 @@ def export_run(path, fmt: str, out, frames=None, force: bool = False,
         walls = run_files.run_walls(f)
         normals = np.array([wall.normal for wall in walls], dtype=float).reshape(-1, 2)
         kind = f["particles/all/kind"][()] if "particles/all/kind" in f else None
-        frames_read = (_Frame(run_files.read_frame(f, index), normals, kind) for index in indices)
+        # a stop asked for ends the export between two frames (its part files then go)
+        frames_read = (_Frame(run_files.read_frame(f, index), normals, kind) for index in stopping.checked(indices))
         if progress is not None:
             frames_read = reporting(frames_read, len(indices), progress)
         if hasattr(writer, "check_room"):
