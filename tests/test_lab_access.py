@@ -3,6 +3,7 @@ forged session tokens, a viewer's cookie behind a presenter's page, foreign Host
 removed lock file, malformed messages. What a viewer could do once in is in test_browser.py."""
 
 import asyncio
+import concurrent.futures
 import html
 import http.client
 import json
@@ -120,10 +121,17 @@ async def _document(netloc: str, token: str, cookie: str) -> str:
         await socket.close()
 
 
+def run_async(coroutine):
+    """``asyncio.run(coroutine)`` in a thread of its own: a browser test before this one in the same process
+    may have left its event loop running in this thread."""
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coroutine).result()
+
+
 def pulled(lab, token: str, cookie: str) -> str:
     """The page the dashboard's websocket builds for a session ``token``, asked with a ``cookie``:
     "presenter", "viewer", "neither", "closed" or "refused STATUS"."""
-    content = asyncio.run(_document(lab["netloc"], token, cookie))
+    content = run_async(_document(lab["netloc"], token, cookie))
     if content == "closed" or content.startswith("refused"):
         return content
     return "viewer" if "viewer-badge" in content else "presenter" if "save-button" in content else "neither"
@@ -216,7 +224,7 @@ def upgrade(netloc: str, path: str, headers: dict) -> int:
 
 def scene_port(lab) -> int:
     """The port of the presenter's 3D scene, from the iframe of the presenter's page."""
-    document = asyncio.run(_document(lab["netloc"], bokeh_page(lab["url"]), lab["presenter_token"]))
+    document = run_async(_document(lab["netloc"], bokeh_page(lab["url"]), lab["presenter_token"]))
     return int(re.search(r"ws://127\.0\.0\.1:(\d+)/", html.unescape(urllib.parse.unquote(document))).group(1))
 
 

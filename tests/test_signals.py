@@ -74,39 +74,41 @@ def cases(rng: random.Random) -> list[tuple[float, tuple[int, ...]]]:
     return picked
 
 
-def check_stop(result: dict, signals: tuple[int, ...], what: str) -> None:
+def check_stop(result: dict, signals: tuple[int, ...], what: str) -> bool:
+    """Whether the command was stopped (else it had done its work: 0, or killed on its way out)."""
     assert "Traceback" not in result["stderr"] and "Exception ignored" not in result["stderr"], result["stderr"]
     assert not result["left"], f"{what}: processes left behind: {result['left']}"
-    if result["code"] == 0:  # it had ended before the first signal
-        return
+    if result["code"] in (0, -signals[0]):  # done before the signal, or after its work, on its way out
+        return False
     assert result["code"] == 128 + signals[0], (what, result)
     assert result["seconds"] < 5.0, (what, result)
     assert result["stderr"].splitlines()[-1].endswith(f"stopped by {stopping.SIGNALS[signals[0]]}"), result["stderr"]
+    return True
 
 
 def test_run_and_export_stopped_at_random_moments_leave_whole_outputs_and_no_process(tmp_path):
     rng = random.Random(61)
     scene = tmp_path / "gas.toml"
     scene.write_text(SCENE)
+    full = tmp_path / "run-full.h5"
+    subprocess.run(command("run", str(scene), "--out", str(full)), check=True, capture_output=True, timeout=300)
+    frames = h5md.summary(full)["frames"]
     stopped = 0
     for k, (delay, signals) in enumerate(cases(rng)):
         out = tmp_path / f"run{k}.h5"
         result = signalled(command("run", str(scene), "--out", str(out), "--checkpoint-every", "1"), delay, signals)
-        check_stop(result, signals, f"run at {delay:.2f} s")
-        stopped += result["code"] != 0
+        was_stopped = check_stop(result, signals, f"run at {delay:.2f} s")
+        stopped += was_stopped
         if out.exists():  # begun: every frame in it whole, its checkpoint one of them
             summary = h5md.summary(out)
             assert summary["frames"] >= 1 and summary["checkpoint_step"] is not None, summary
+            assert was_stopped or summary["frames"] == frames
             with h5md.open_run(out) as f:
                 h5md.read_frame(f, -1)
-    full = tmp_path / "run-full.h5"
-    subprocess.run(command("run", str(scene), "--out", str(full)), check=True, capture_output=True, timeout=300)
-    frames = h5md.summary(full)["frames"]
     for k, (delay, signals) in enumerate(cases(rng)):
         out = tmp_path / f"vtk{k}"
         result = signalled(command("export", str(full), "--format", "vtk", "--out", str(out)), delay, signals)
-        check_stop(result, signals, f"export at {delay:.2f} s")
-        stopped += result["code"] != 0
+        stopped += check_stop(result, signals, f"export at {delay:.2f} s")
         assert not list(tmp_path.glob(".*.part")), "an export's part files were left"
         if out.exists():  # written whole or not at all
             assert len(list(out.iterdir())) == 1 + 3 * frames
