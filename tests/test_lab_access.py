@@ -11,7 +11,9 @@ import logging
 import re
 import subprocess
 import sys
+import threading
 import time
+import types
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -25,7 +27,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from granlab.app.lab.access import COOKIE, Access, served_names
 from granlab.app.lab.logs import quiet_client_logs
-from granlab.app.lab.server import endpoint, spawn
+from granlab.app.lab.server import UNUSED_SESSION_MS, endpoint, spawn
 
 BOKEH_TOKEN = '"token":"'
 
@@ -153,11 +155,12 @@ def test_a_viewer_s_cookie_never_opens_the_presenter_s_page(token_lab):
     assert pulled(token_lab, forged({}), "junk") == "refused 403"
     # a page's own (signed) session, discarded unused and made again as its websocket opens: its role is
     # the websocket's cookie's, never the page's address's
+    unused_past = UNUSED_SESSION_MS / 1000 + 1.5  # the unused sessions' lifetime, looked for every second
     presenter_page = bokeh_page(token_lab["url"])
-    time.sleep(2.5)  # past the unused sessions' lifetime (1 s, looked for every second)
+    time.sleep(unused_past)
     assert pulled(token_lab, presenter_page, viewer) == "viewer"
     presenter_page = bokeh_page(token_lab["url"])
-    time.sleep(2.5)
+    time.sleep(unused_past)
     assert pulled(token_lab, presenter_page, token_lab["presenter_token"]) == "presenter"
     assert pulled(token_lab, bokeh_page(token_lab["viewer"]), viewer) == "viewer"
     # the presenter's page opened again in a browser whose cookie a viewer's page set is the presenter's
@@ -280,9 +283,11 @@ def test_a_client_s_refused_messages_are_one_line_each_and_the_lab_s_own_faults_
                                                           "bokeh.server.protocol_handler", "bokeh.server.views.ws",
                                                           "asyncio", "panel.io.document")}
     filters = {name: list(logger.filters) for name, logger in loggers.items()}
+    levels = {name: logger.level for name, logger in loggers.items()}
     kept = Kept()
     for logger in loggers.values():  # panel's loggers do not propagate to the root's
         logger.addHandler(kept)
+        logger.setLevel(logging.DEBUG)  # distributed, once imported in this process, sets tornado's to CRITICAL
     try:
         quiet_client_logs(("presenterSECRET",))
         try:
@@ -313,6 +318,7 @@ def test_a_client_s_refused_messages_are_one_line_each_and_the_lab_s_own_faults_
         logging.setLogRecordFactory(factory)
         for name, logger in loggers.items():
             logger.filters[:] = filters[name]
+            logger.setLevel(levels[name])
             logger.removeHandler(kept)
     lines = [record.getMessage() for record in kept.records]
     assert lines[:2] == ["refused a page's message (ValueError: None is not in list)",
@@ -322,3 +328,125 @@ def test_a_client_s_refused_messages_are_one_line_each_and_the_lab_s_own_faults_
                          "GET /ws?token=… (127.0.0.1)", "404 GET /nothing?token=… (127.0.0.1) 1.00ms",
                          "refused a websocket from Origin 'http://evil.example' (not a page of this lab)"]
     assert not any("SECRET" in line for line in lines)
+
+
+@pytest.fixture(scope="module")
+def small_class_lab(tmp_path_factory):
+    data = tmp_path_factory.mktemp("small-class-lab-data")
+    process, url, viewer = spawn(data, "--tokens", "--preset", "ratchet16", "--max-viewers", "2")
+    yield {"url": url, "viewer": viewer, "process": process}
+    process.terminate()
+    process.wait(timeout=30)
+
+
+class Loop:
+    """An event loop in a thread of its own, for clients that stay open while the test goes on."""
+
+    def __init__(self):
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+
+    def run(self, coroutine, timeout=120):
+        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(timeout)
+
+    def close(self):
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(10)
+
+
+def pages(lab) -> dict:
+    with urllib.request.urlopen(endpoint(lab["url"], "status"), timeout=30) as response:
+        return json.loads(response.read())["pages"]
+
+
+def test_a_class_larger_than_the_lab_holds_is_told_so_and_the_presenter_always_gets_in(small_class_lab):
+    """Forty clients joining at once had every page built however many came, behind each other; now a
+    lab holds ``--max-viewers`` viewers' pages (60 by default) and tells one more, in a small page that
+    tries again by itself, without building a session for it."""
+    from granlab.app.lab.classroom import Session
+
+    loop = Loop()
+    try:
+        viewers = [Session(small_class_lab["viewer"]) for _ in range(2)]
+        for session in viewers:
+            loop.run(session.open())
+        assert pages(small_class_lab)["viewers"] == 2
+        body = []
+        assert status_of(small_class_lab["viewer"], body=body) == 503
+        assert "The class is full: this lab holds 2 viewers' pages" in body[0] and "refresh" in body[0]
+        assert pages(small_class_lab)["refused_full"] == 1
+        assert status_of(small_class_lab["url"]) == 200  # the presenter's page is never refused
+        loop.run(viewers[0].close())
+        deadline = time.monotonic() + 20
+        while pages(small_class_lab)["viewers"] > 1 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert status_of(small_class_lab["viewer"]) == 200  # a place came free
+    finally:
+        for session in viewers[1:]:
+            loop.run(session.close())
+        loop.close()
+
+
+class FakeStream:
+    def __init__(self, waiting: int):
+        self._total_write_index, self._total_write_done_index = waiting, 0
+        self.was_closed = False
+
+    def closed(self):
+        return self.was_closed
+
+    def close(self):
+        self.was_closed = True
+
+
+class FakeClient:
+    def __init__(self, waiting: int = 0, role: str = "viewer"):
+        self.stream = FakeStream(waiting)
+        self.ws_connection = types.SimpleNamespace(stream=self.stream)
+        self.request = types.SimpleNamespace(remote_ip="10.0.0.7", connection=types.SimpleNamespace(stream=self.stream))
+        self.role = role
+        self.finished = None
+
+    def set_status(self, status):
+        self.status = status
+
+    def set_header(self, name, value):
+        pass
+
+    def finish(self, text=""):
+        self.finished = text
+
+
+def test_pages_are_built_one_at_a_time_the_presenter_first_and_a_client_that_stops_reading_goes():
+    from granlab.app.lab.gate import MAX_BACKLOG_BYTES, SessionGate, drop_stalled
+
+    async def scenario():
+        gate = SessionGate(max_viewers=2)
+        order = []
+
+        async def page(client):
+            if await gate.admit(client, client.role):
+                order.append(client.role)
+                await asyncio.sleep(0.01)  # its build
+                gate.built()
+
+        first = FakeClient()
+        await gate.admit(first, "viewer")  # being built
+        waiting = [asyncio.create_task(page(FakeClient(role=role))) for role in ("viewer", "viewer", "presenter")]
+        await asyncio.sleep(0.01)
+        assert gate.waiting == 3
+        full = FakeClient()
+        assert not await gate.admit(full, "viewer") and full.status == 503 and "class is full" in full.finished
+        gone = FakeClient(role="presenter")  # a presenter's reload that left before its turn
+        gone.stream.was_closed = True
+        waiting.append(asyncio.create_task(page(gone)))
+        gate.built()
+        await asyncio.gather(*waiting)
+        return order, gate
+
+    order, gate = asyncio.run(scenario())
+    assert order == ["presenter", "viewer", "viewer"] and gate.gone == 1 and gate.full == 1 and gate.waiting == 0
+    clients = [FakeClient(waiting=MAX_BACKLOG_BYTES + 1), FakeClient(waiting=MAX_BACKLOG_BYTES)]
+    assert drop_stalled(clients, gate) == 1 and clients[0].stream.was_closed and not clients[1].stream.was_closed
+    assert gate.state()["dropped_not_reading"] == 1

@@ -158,6 +158,9 @@ def add(commands) -> None:
     bench.add_argument("--viewers", type=int, metavar="N",
                        help="with --lab: a classroom instead, one presenter and N viewers as light clients (nothing "
                             "drawn) on the lab served with tokens, at 256 and 5600 disks (or --particles)")
+    bench.add_argument("--storm", action="store_true",
+                       help="with --lab --viewers N: N viewers joining and leaving at once for --seconds, and 6 that "
+                            "never read; /status's latency and the server's memory throughout and after")
     bench.set_defaults(handler=_bench, printer=_print_bench)
 
 
@@ -165,6 +168,8 @@ def choose_handler(args) -> None:
     """``--lab`` benchmarks the lab instead (:mod:`granlab.app.lab.bench`); ``--viewers`` goes with it."""
     if args.viewers is not None and not args.lab:
         raise GranLabError("--viewers goes with --lab: granlab bench --lab --viewers N")
+    if args.storm and not args.lab:
+        raise GranLabError("--storm goes with --lab: granlab bench --lab --storm --viewers N")
     if args.lab:
         from granlab.app.lab import bench as lab_bench
 

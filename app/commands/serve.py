@@ -20,16 +20,19 @@ def add(commands) -> None:
     serve.add_argument("--pause-without-pages", type=float, metavar="SECONDS",
                        help="pause a run left with no page open after SECONDS; it goes on when a page opens "
                             "(default 60; 0: never)")
+    serve.add_argument("--max-viewers", type=int, metavar="N",
+                       help="viewers' pages the lab holds at once; one more is told the class is full (default 60)")
     serve.set_defaults(handler=None, printer=None)
 
 
 def serve(args) -> int:
     """Check the options, then serve until stopped; the exit status (130 after Ctrl-C, 143 after SIGTERM)."""
-    from granlab.app.lab.options import HISTORY_MIB, PAUSE_WITHOUT_PAGES, check_serve_options
+    from granlab.app.lab.options import HISTORY_MIB, MAX_VIEWERS, PAUSE_WITHOUT_PAGES, check_serve_options
 
     limits = {"history_mib": HISTORY_MIB if args.history_mib is None else args.history_mib,
               "pause_without_pages": PAUSE_WITHOUT_PAGES if args.pause_without_pages is None
-              else args.pause_without_pages}
+              else args.pause_without_pages,
+              "max_viewers": MAX_VIEWERS if args.max_viewers is None else args.max_viewers}
     check_serve_options(args.host, args.port, args.data_dir, **limits)
     from granlab.app.lab.server import serve as serve_lab
 

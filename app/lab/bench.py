@@ -38,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.request
 from pathlib import Path
 
 import numba
@@ -55,11 +56,22 @@ CLASSROOM_TARGETS = {"frames_per_s": 10.0, "latency_ms": 200.0, "engine_share": 
 the presenter's median latency (below), the engine's share (at least), each viewer's
 megabits per second (at most; the issue sets it at 5600 disks)."""
 CLASSROOM_SIZES = (256, 5600)
+STORM_TARGETS = {"status_ms": 200.0, "memory_back_mib": 50.0}
+"""Issue 61's storm: ``/status`` within 200 ms throughout, and the server's memory back within 50 MiB of its
+start once the clients left."""
+STORM_STUCK = 6
+STORM_SETTLE = 5.0  # seconds watched before the clients come
+STORM_AFTER = 60.0  # and after they left
 SCENE_UPDATE = "SceneNodeUpdateMessage /granlab/"  # most of the scene's keys: left out of the printed table
 CLASSROOM_WARMUP = 3.0  # seconds after the last page opened: each page's first messages are the whole scene
 
 
 def handler(args) -> dict:
+    if args.storm:
+        if args.viewers is None or args.viewers < 1 or args.seconds <= 0:
+            raise GranLabError("bench --lab --storm takes --viewers N (clients joining and leaving, N >= 1) and "
+                               f"--seconds > 0, not {args.viewers} and {args.seconds}")
+        return storm(args.viewers, args.seconds, STORM_STUCK, args.particles)
     if args.viewers is not None:
         if args.viewers < 1 or args.seconds <= 0:
             raise GranLabError(f"bench --lab --viewers takes --viewers >= 1 and --seconds > 0, not {args.viewers} and "
@@ -269,6 +281,9 @@ def print_result(r: dict) -> None:
     if "runs" in r:
         print_classroom(r)
         return
+    if "storm" in r:
+        print_storm(r)
+        return
     mark = {True: "ok", False: "BELOW TARGET"}
     print(f"lab benchmark, ratchet preset, {r['particles']} disks, one tab")
     print(f"  granlab bench (1 thread):  {r['bench_1_thread'] / 1e6:.2f} M particle-steps/s")
@@ -354,6 +369,90 @@ def _classroom_run(particles: int, seconds: float, viewers: int) -> dict:
                  "engine": r["engine_share"] >= CLASSROOM_TARGETS["engine_share"],
                  "bandwidth": spread["mbit_per_s"]["max"] <= CLASSROOM_TARGETS["mbit_per_s"]}
     return r
+
+
+def storm(clients: int, seconds: float, stuck: int = STORM_STUCK, particles: int | None = None) -> dict:
+    """``clients`` viewers joining and leaving the lab (served with tokens, the ratchet preset at ``particles``
+    disks, 256 by default) at once for ``seconds`` s, and ``stuck`` that join once and never read
+    (:func:`granlab.app.lab.classroom.storm`), from a process apart. ``/status`` is asked every 0.25 s from
+    this one throughout, and STORM_AFTER s after they left, with the server's resident memory."""
+    load = os.getloadavg()[0]
+    samples = []
+    with tempfile.TemporaryDirectory() as data, tempfile.TemporaryDirectory() as work:
+        options = ("--particles", str(particles)) if particles else ()
+        process, presenter, viewer = spawn(data, "--tokens", *options)
+        try:
+            status_url = presenter.replace("/?", "/status?")
+            _watch(status_url, process.pid, time.monotonic() + STORM_SETTLE, samples, "before")
+            spec, out, errors = Path(work, "spec.json"), Path(work, "result.json"), Path(work, "stderr")
+            spec.write_text(json.dumps({"storm": True, "viewer": viewer, "clients": clients, "stuck": stuck,
+                                        "seconds": seconds, "out": str(out)}))
+            with errors.open("w") as stderr:
+                client = subprocess.Popen([sys.executable, "-m", "granlab.app.lab.classroom", str(spec)],
+                                          stdout=subprocess.DEVNULL, stderr=stderr)
+            while client.poll() is None:
+                _watch(status_url, process.pid, time.monotonic() + 1.0, samples, "storm")
+            if client.returncode != 0:
+                raise GranLabError(f"the storm's clients failed: {errors.read_text().strip()[-500:]}")
+            _watch(status_url, process.pid, time.monotonic() + STORM_AFTER, samples, "after")
+            clients_saw = json.loads(out.read_text())
+            last = json.loads(_get(status_url))
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+    phases = {}
+    for phase in ("before", "storm", "after"):
+        rows = [row for row in samples if row[0] == phase]
+        latency = sorted(row[1] for row in rows)
+        phases[phase] = {"status_ms": {"median": statistics.median(latency), "max": latency[-1],
+                                       "p95": latency[int(0.95 * (len(latency) - 1))]},
+                         "over_target": sum(ms > STORM_TARGETS["status_ms"] for ms in latency), "samples": len(rows),
+                         "memory_mib": {"first": rows[0][2], "peak": max(row[2] for row in rows), "last": rows[-1][2]}}
+    start, end = phases["before"]["memory_mib"]["last"], phases["after"]["memory_mib"]["last"]
+    return {"storm": True, "clients": clients, "stuck": stuck, "seconds": seconds, "particles": particles or 256,
+            "cores": os.cpu_count(), "load_before": load, "phases": phases, "clients_saw": clients_saw,
+            "pages": last["pages"], "targets": STORM_TARGETS,
+            "pass": {"status": all(phases[p]["status_ms"]["max"] <= STORM_TARGETS["status_ms"] for p in phases),
+                     "memory": end - start <= STORM_TARGETS["memory_back_mib"]}}
+
+
+def _get(url: str) -> bytes:
+    with urllib.request.urlopen(url, timeout=60) as response:
+        return response.read()
+
+
+def _watch(status_url: str, pid: int, until: float, samples: list, phase: str) -> None:
+    """``(phase, /status's milliseconds, resident MiB)`` every 0.25 s until ``until`` (a ``/status`` that does
+    not answer within a minute counts as a minute)."""
+    while time.monotonic() < until:
+        began = time.monotonic()
+        try:
+            _get(status_url)
+        except OSError:
+            pass
+        samples.append((phase, 1000.0 * (time.monotonic() - began), resident_mib(pid)))
+        time.sleep(0.25)
+
+
+def print_storm(r: dict) -> None:
+    mark = {True: "", False: " (!)"}
+    print(f"storm benchmark: {r['clients']} viewers joining and leaving at once for {r['seconds']:.0f} s and "
+          f"{r['stuck']} that never read, ratchet preset at {r['particles']} disks, {r['cores']} cores, load "
+          f"{r['load_before']:.2f}; (!) misses the target")
+    for phase, row in r["phases"].items():
+        ms, memory = row["status_ms"], row["memory_mib"]
+        print(f"  {phase:<6}  /status ms median {ms['median']:.0f}, p95 {ms['p95']:.0f}, max {ms['max']:.0f} (target <= "
+              f"{r['targets']['status_ms']:g}: {row['over_target']} of {row['samples']} over); server MiB "
+              f"{memory['first']:.0f} -> peak {memory['peak']:.0f} -> {memory['last']:.0f}")
+    saw, pages = r["clients_saw"], r["pages"]
+    page = saw["page_seconds"] or {"median": float("nan"), "max": float("nan")}
+    print(f"  the clients: {saw['pages']} pages opened (median {page['median']:.1f} s, max {page['max']:.1f} s), "
+          f"{saw['full']} told the class was full, {saw['failed']} gave up or failed {saw['errors']}")
+    print(f"  the lab: {pages['refused_full']} refused full, {pages['left_waiting']} left while waiting, "
+          f"{pages['dropped_not_reading']} dropped for not reading")
+    memory = r["phases"]["after"]["memory_mib"]["last"] - r["phases"]["before"]["memory_mib"]["last"]
+    print(f"  memory after they left: {memory:+.0f} MiB from the start (target <= "
+          f"{r['targets']['memory_back_mib']:g}){mark[r['pass']['memory']]}; /status{mark[r['pass']['status']]}")
 
 
 def _latency(run: dict, key: str) -> str:

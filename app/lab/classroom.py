@@ -23,6 +23,7 @@ the clients' process stays small.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import html
 import importlib.metadata
 import json
@@ -31,6 +32,7 @@ import re
 import statistics
 import sys
 import time
+import urllib.error
 import urllib.parse
 import urllib.request
 import zlib
@@ -68,9 +70,9 @@ def _size(message: str | bytes) -> int:
     return len(message.encode()) if isinstance(message, str) else len(message)
 
 
-def _page(url: str) -> tuple[str, str, str]:
+def _page(url: str, timeout: float = OPEN_TIMEOUT) -> tuple[str, str, str]:
     """The page at ``url``: bokeh's session token, the cookie it sets and its origin."""
-    with urllib.request.urlopen(url, timeout=OPEN_TIMEOUT) as response:
+    with urllib.request.urlopen(url, timeout=timeout) as response:
         text = response.read().decode()
         cookie = "; ".join(c.split(";")[0] for c in response.headers.get_all("Set-Cookie") or [])
     found = BOKEH_TOKEN.search(text)
@@ -124,8 +126,9 @@ class Socket:
 class Session:
     """One page's two websockets; ``anatomy``: sort the bytes received by what carried them."""
 
-    def __init__(self, url: str, anatomy: bool = False):
+    def __init__(self, url: str, anatomy: bool = False, page_timeout: float = OPEN_TIMEOUT):
         self.url = url
+        self.page_timeout = page_timeout
         self.bokeh = Socket(anatomy)
         self.scene = Socket(anatomy)
         self.names: dict[str, str] = {}  # bokeh model id -> its type and first css class
@@ -138,12 +141,15 @@ class Session:
         self._acks: set[asyncio.Task] = set()
         self._sending = asyncio.Lock()  # a bokeh message is three websocket messages: never two interleaved
 
-    async def open(self) -> None:
-        token, cookie, origin = await asyncio.to_thread(_page, self.url)
+    async def open(self, reads: bool = True) -> None:
+        """Open the page and its websockets; one that does not ``reads`` pulls the document and reads nothing
+        after (its websockets queue one message, then leave the rest to the network)."""
+        token, cookie, origin = await asyncio.to_thread(_page, self.url, self.page_timeout)
         address = urllib.parse.urlsplit(self.url)
+        queue = {} if reads else {"max_queue": 1}
         bokeh = await connect(f"ws://{address.netloc}/ws", subprotocols=["bokeh", token], origin=origin,
                               additional_headers={"Cookie": cookie}, max_size=None, compression=None,
-                              open_timeout=OPEN_TIMEOUT)
+                              open_timeout=OPEN_TIMEOUT, **queue)
         self.sockets.append(bokeh)
         # bokeh's client pulls the document once the server has acknowledged the connection: the
         # server reads nothing before (its receiver is made when it sends the ACK)
@@ -154,7 +160,8 @@ class Session:
         await bokeh.send("{}")
         while not self.document:  # the server's patches may come before the reply; they count too
             self._bokeh_received(await asyncio.wait_for(bokeh.recv(), OPEN_TIMEOUT))
-        self.tasks.append(asyncio.create_task(self._read(bokeh, self._bokeh_received)))
+        if reads:
+            self.tasks.append(asyncio.create_task(self._read(bokeh, self._bokeh_received)))
         found = IFRAME.search(html.unescape(json.dumps(self.document)))
         if found is None:
             raise RuntimeError("no scene iframe in the dashboard's document")
@@ -162,9 +169,10 @@ class Session:
         if page.path == "/viewer-scene":  # a viewer's scene: the viewers' stream, from the dashboard's server
             scene = await connect(f"ws://{address.netloc}/viewer-stream?{page.query}", origin=origin,
                                   additional_headers={"Cookie": cookie}, max_size=None, compression=None,
-                                  open_timeout=OPEN_TIMEOUT)
+                                  open_timeout=OPEN_TIMEOUT, **queue)
             self.sockets.append(scene)
-            self.tasks.append(asyncio.create_task(self._read(scene, self._stream_received)))
+            if reads:
+                self.tasks.append(asyncio.create_task(self._read(scene, self._stream_received)))
             return
         given = urllib.parse.parse_qs(page.query).get("websocket")
         scene = await connect(given[0] if given else f"ws://{page.netloc}/", origin=f"http://{page.netloc}",
@@ -365,10 +373,54 @@ async def classroom(spec: dict) -> dict:
             "command_ms_median": statistics.median(latencies["command_ms"]) if latencies["command_ms"] else None}
 
 
+STORM_PAGE_TIMEOUT = 25.0
+"""A client of the storm that waits longer for its page gives up (and closes its connection), as a phone would."""
+
+
+async def _storm_client(viewer: str, deadline: float, rng, counts: dict, reads: bool) -> None:
+    """A viewer that joins (the page, its two websockets), stays 1 to 5 s reading them, leaves and joins
+    again until ``deadline``; one that does not ``reads`` joins once and never reads its websockets (its
+    queue of one message full, it leaves the server's data in the network and then in the server)."""
+    while time.monotonic() < deadline:
+        session = Session(viewer, page_timeout=STORM_PAGE_TIMEOUT)
+        began = time.monotonic()
+        try:
+            await asyncio.wait_for(session.open(reads), STORM_PAGE_TIMEOUT)
+            counts["pages"] += 1
+            counts["page_seconds"].append(time.monotonic() - began)
+            await asyncio.sleep(rng.uniform(1.0, 5.0) if reads else max(0.0, deadline - time.monotonic()))
+        except urllib.error.HTTPError as error:
+            counts["full" if error.code == 503 else "failed"] += 1
+            await asyncio.sleep(rng.uniform(0.5, 2.0))
+        except (OSError, RuntimeError, asyncio.TimeoutError, ValueError) as error:  # the lab too busy to answer
+            counts["failed"] += 1
+            counts["errors"][type(error).__name__] += 1
+        finally:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(session.close(), 5.0)
+
+
+async def storm(spec: dict) -> dict:
+    """``spec["clients"]`` viewers joining and leaving at once for ``spec["seconds"]`` s and
+    ``spec["stuck"]`` that join once and never read (:func:`_storm_client`); what they got."""
+    import concurrent.futures
+    import random
+
+    asyncio.get_running_loop().set_default_executor(concurrent.futures.ThreadPoolExecutor(spec["clients"] + 8))
+    counts = {"pages": 0, "full": 0, "failed": 0, "page_seconds": [], "errors": Counter()}
+    deadline = time.monotonic() + spec["seconds"]
+    clients = [_storm_client(spec["viewer"], deadline, random.Random(k), counts, True) for k in range(spec["clients"])]
+    clients += [_storm_client(spec["viewer"], deadline, random.Random(-k), counts, False) for k in range(spec["stuck"])]
+    await asyncio.gather(*clients)
+    seconds = counts.pop("page_seconds")
+    return {**counts, "errors": dict(counts["errors"]),
+            "page_seconds": {"median": statistics.median(seconds), "max": max(seconds)} if seconds else None}
+
+
 def main(argv: list[str]) -> int:
     spec = json.loads(Path(argv[0]).read_text())
     try:
-        result = asyncio.run(classroom(spec))
+        result = asyncio.run(storm(spec) if spec.get("storm") else classroom(spec))
     except Exception as error:  # one line for the bench to show: the clients' process has no terminal
         print(f"{type(error).__name__}: {error}", file=sys.stderr)
         return 1

@@ -26,11 +26,18 @@ MAX_HISTORY_MIB = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 *
 PAUSE_WITHOUT_PAGES = 60.0
 """Seconds a run goes on with no page open before it pauses (``--pause-without-pages``)."""
 MAX_PAUSE_WITHOUT_PAGES = 86400.0
+MAX_VIEWERS = 60
+"""Viewers' pages a lab holds by default (``--max-viewers``): a class of forty and a margin."""
+MAX_MAX_VIEWERS = 1000
 
 
-def check_serve_options(host: str, port: int, data_dir, history_mib: float, pause_without_pages: float) -> None:
+def check_serve_options(host: str, port: int, data_dir, history_mib: float, pause_without_pages: float,
+                        max_viewers: int = MAX_VIEWERS) -> None:
     """Refuse, before the lab starts, what it could not serve with (each in one line naming what is
     allowed)."""
+    if not 1 <= max_viewers <= MAX_MAX_VIEWERS:
+        raise GranLabError(f"--max-viewers {max_viewers} is not allowed: from 1 to {MAX_MAX_VIEWERS} (each viewer's "
+                           "page is a session of its own on this machine)")
     check_address(host, port)
     check_output(data_dir, "--data-dir", folder=True)
     if not 0 < history_mib <= MAX_HISTORY_MIB:  # NaN fails too

@@ -37,7 +37,9 @@ from collections import deque
 from pathlib import Path
 
 import panel as pn
+import tornado.ioloop
 import tornado.web
+from bokeh.server import urls as bokeh_urls
 from bokeh.settings import settings as bokeh_settings
 from panel.io.resources import LOCAL_DIST, _env
 from websockets.http11 import Request
@@ -54,6 +56,7 @@ from . import lessons
 from .access import Access, TokenAuth, connection_request
 from .dashboard import Dashboard
 from .engine_thread import LabEngine
+from .gate import MAX_VIEWERS, GatedDocHandler, SessionGate, drop_stalled
 from .logs import quiet_client_logs
 from .options import HISTORY_MIB, LOCAL_HOSTS, PAUSE_WITHOUT_PAGES, check_serve_options, claimed_data_folder
 from .scene import SceneView
@@ -72,6 +75,15 @@ MALLOPT = getattr(LIBC, "mallopt", None)
 M_ARENA_MAX = -8
 # the frames kept for saves and movies may take at most half this machine's memory
 TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
+RELEASE_EVERY = 10.0
+"""Seconds between two releases at least: a full collection takes the loop for 0.1-0.3 s with forty pages open,
+and a class leaving one by one would otherwise pay it every two seconds (12 % of the loop in a storm)."""
+UNUSED_SESSION_MS = 5000
+"""How long a page's session waits for its websocket before bokeh discards it: at 1 s a loaded server (forty
+phones joining) discarded most pages before their websockets came, and built each page a second time as its
+websocket opened (a quarter of the loop's time in that storm)."""
+STALLED_CHECK_MS = 1000
+"""How often the lab looks for pages that stopped reading."""
 STARTER_STOP_SECONDS = 2.0
 """How long a stopping lab waits for its compile workers to be killed."""
 # a phone lays the page out at its own width (without this, as a 980-pixel desktop page shrunk)
@@ -139,8 +151,10 @@ class Lab:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 5006, data_dir: str | Path = "granlab-data",
                  preset: str = "ratchet", scene_rate: float = 30.0, tokens: bool = False,
-                 history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES, **changes):
+                 history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES,
+                 max_viewers: int = MAX_VIEWERS, **changes):
         self.host = host
+        self.gate = SessionGate(max_viewers, UNUSED_SESSION_MS / 1000)
         self.port = port or _free_port(host)
         self.access = Access(host, self.port, tokens)
         settings = preset_settings(preset, **changes)  # a bad setting is refused before anything starts
@@ -162,24 +176,35 @@ class Lab:
         self.stream = ViewerStream()
         self._stop = threading.Event()
         self._release_pending = False
+        self._released = -RELEASE_EVERY
+        self.releases = 0
+        """The memory releases done since the start (``/status``: ``memory_releases``)."""
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
         # environment holds (cdn would point every stylesheet at cdn.holoviz.org)
         bokeh_settings.resources.set_value("server")
         access = {"access": self.access}
-        self.server = pn.serve({"/": self._session}, port=self.port, address=host,
-                               websocket_origin=self.access.websocket_origins(), auth_provider=TokenAuth(self.access),
-                               sign_sessions=True, secret_key=self.access.secret,
-                               show=False, start=False, title="GranLab", threaded=False, verbose=False,
-                               extra_patterns=[(r"/status", JSONHandler, {**access, "read": self.status}),
-                                               (r"/scene", JSONHandler, {**access, "read": self.scene.state}),
-                                               (r"/lesson", LessonHandler, access),
-                                               (r"/viewer-scene", ViewerSceneHandler, access),
-                                               (r"/viewer-stream", StreamSocket, {**access, "stream": self.stream})],
-                               check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=1000,
-                               # gzip for a browser that accepts it: a phone on the classroom's Wi-Fi fetches
-                               # bokeh's and panel's scripts in 0.8 MB rather than 3.0 MB
-                               compress_response=True)
+        with gated_pages():
+            self.server = pn.serve(
+                {"/": self._session}, port=self.port, address=host, websocket_origin=self.access.websocket_origins(),
+                auth_provider=TokenAuth(self.access), sign_sessions=True, secret_key=self.access.secret,
+                show=False, start=False, title="GranLab", threaded=False, verbose=False,
+                extra_patterns=[(r"/status", JSONHandler, {**access, "read": self.status}),
+                                (r"/scene", JSONHandler, {**access, "read": self.scene.state}),
+                                (r"/lesson", LessonHandler, access),
+                                (r"/viewer-scene", ViewerSceneHandler, access),
+                                (r"/viewer-stream", StreamSocket, {**access, "stream": self.stream})],
+                check_unused_sessions_milliseconds=1000, unused_session_lifetime_milliseconds=UNUSED_SESSION_MS,
+                # gzip for a browser that accepts it: a phone on the classroom's Wi-Fi fetches
+                # bokeh's and panel's scripts in 0.8 MB rather than 3.0 MB
+                compress_response=True)
+        self.server._tornado.granlab_gate = self.gate
+        self._stalled = tornado.ioloop.PeriodicCallback(self._drop_stalled, STALLED_CHECK_MS)
+
+    def _drop_stalled(self) -> None:
+        """Drop the pages that stopped reading their websockets (:func:`granlab.app.lab.gate.drop_stalled`)."""
+        drop_stalled([client._socket for client in self.server._tornado._clients], self.gate)
+        drop_stalled(self.stream.sockets, self.gate)
 
     def _start_engine(self, data_dir, preset: str, history_mib: float, pause_without_pages: float, changes: dict,
                       kernel_sets) -> None:
@@ -215,6 +240,8 @@ class Lab:
         status["scene_frames"] = self.scene.frames_pushed
         status["stream_messages"] = self.stream.messages
         status["stream_viewers"] = len(self.stream.sockets)
+        status["pages"] = self.gate.state()
+        status["memory_releases"] = self.releases
         return status
 
     def _session(self):
@@ -236,6 +263,9 @@ class Lab:
         self.engine.tabs += 1
         self.engine.submit("tab_opened")
         pn.state.on_session_destroyed(self._closed)
+        if role == "viewer":
+            self.gate.opened(pn.state.curdoc.session_context)
+            pn.state.on_session_destroyed(self.gate.closed)
         host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
         scene_url = f"http://{host}:{self.scene.port}/"
         token = self.access.token(role)
@@ -270,13 +300,16 @@ class Lab:
         self.engine.submit("tab_closed")
         if MALLOC_TRIM is not None and not self._release_pending:
             self._release_pending = True
-            self.server.io_loop.call_later(TRIM_DELAY, self._release_memory)
+            wait = max(TRIM_DELAY, self._released + RELEASE_EVERY - time.monotonic())
+            self.server.io_loop.call_later(wait, self._release_memory)
 
     def _release_memory(self) -> None:
         """Collect the closed sessions' documents (reference cycles) and hand the freed heap back."""
         self._release_pending = False
         gc.collect()
         MALLOC_TRIM(0)
+        self._released = time.monotonic()
+        self.releases += 1
 
     def _push_scene(self) -> None:
         last = -1
@@ -307,6 +340,7 @@ class Lab:
 
     def start(self) -> None:
         self.stream.io_loop = self.server.io_loop
+        self._stalled.start()
         self._starter.start()
         self._scene_thread.start()
         self.server.start()
@@ -336,6 +370,20 @@ class Lab:
         self.server.stop()
 
 
+@contextlib.contextmanager
+def gated_pages():
+    """Within this block a bokeh server made builds its pages as :class:`GatedDocHandler` lets it (bokeh
+    reads its page routes, ``per_app_patterns``, as a server is made)."""
+    patterns = bokeh_urls.per_app_patterns
+    saved = list(patterns)
+    patterns[:] = [(route, GatedDocHandler if handler.__name__ == "DocHandler" else handler)
+                   for route, handler in saved]
+    try:
+        yield
+    finally:
+        patterns[:] = saved
+
+
 def _free_port(host: str) -> int:
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
         sock.bind((host, 0))
@@ -344,23 +392,23 @@ def _free_port(host: str) -> int:
 
 def serve(host: str = "127.0.0.1", port: int = 5006, data_dir: str = "granlab-data", preset: str = "ratchet",
           tokens: bool = False, history_mib: float = HISTORY_MIB, pause_without_pages: float = PAUSE_WITHOUT_PAGES,
-          **changes) -> int:
+          max_viewers: int = MAX_VIEWERS, **changes) -> int:
     """Start the lab and serve until stopped (prints the URL, or with tokens the presenter's and
     the viewers' URLs; any host but this machine's loopback serves with tokens); returns the exit
     status (:meth:`Lab.run_forever`). ``changes``: settings of the first preset (e.g. ``particles=5600``)."""
-    check_serve_options(host, port, data_dir, history_mib, pause_without_pages)
+    check_serve_options(host, port, data_dir, history_mib, pause_without_pages, max_viewers)
     with claimed_data_folder(data_dir):  # one lab a folder: its presenter's address is there
-        return _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes)
+        return _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, max_viewers, changes)
 
 
-def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, changes) -> int:
+def _serve(host, port, data_dir, preset, tokens, history_mib, pause_without_pages, max_viewers, changes) -> int:
     logging.getLogger("granlab.lab").setLevel(logging.INFO)
     logging.getLogger("granlab.lab").addHandler(logging.StreamHandler(sys.stderr))
     tokens = tokens or host not in LOCAL_HOSTS
     if MALLOPT is not None:
         MALLOPT(M_ARENA_MAX, 2)
     lab = Lab(host=host, port=port, data_dir=data_dir, preset=preset, tokens=tokens, history_mib=history_mib,
-              pause_without_pages=pause_without_pages, **changes)
+              pause_without_pages=pause_without_pages, max_viewers=max_viewers, **changes)
     quiet_client_logs(lab.access.tokens)
     if lab.viewer_url:
         print(f"viewers' address: {lab.viewer_url} (they see the lab live and change nothing; give it to the "
