@@ -25,7 +25,7 @@ from playwright.sync_api import expect
 
 from granlab.app.lab.bench import resident_mib
 from granlab.app.lab.pace import DRAW_WAIT_SECONDS
-from granlab.app.lab.server import TRIM_DELAY, read_status, spawn
+from granlab.app.lab.server import read_status, spawn
 from granlab.engine.protocols.presets import PRESETS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -809,8 +809,9 @@ def test_tabs_opened_and_closed_leave_the_server_memory_where_it_was(browser, sm
             page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0", polling=200, timeout=60000)
             wait_model(page, "q-gamma-path", "m.data.x0.length > 0")  # the tab pulled the series
             page.close()
-        wait_status(lab, lambda s: s["tabs"] == 0)
-        time.sleep(TRIM_DELAY + 3.0)
+        releases = wait_status(lab, lambda s: s["tabs"] == 0)["memory_releases"]
+        wait_status(lab, lambda s: s["memory_releases"] > releases)  # the closed tabs' memory handed back
+        time.sleep(1.0)
         return resident_mib(lab["process"].pid)
 
     before = churn(4)  # the first tabs fill caches that later ones reuse

@@ -445,7 +445,7 @@ def test_pages_are_built_one_at_a_time_the_presenter_first_and_a_client_that_sto
         await asyncio.gather(*waiting)
         return order, gate
 
-    order, gate = asyncio.run(scenario())
+    order, gate = run_async(scenario())
     assert order == ["presenter", "viewer", "viewer"] and gate.gone == 1 and gate.full == 1 and gate.waiting == 0
     clients = [FakeClient(waiting=MAX_BACKLOG_BYTES + 1), FakeClient(waiting=MAX_BACKLOG_BYTES)]
     assert drop_stalled(clients, gate) == 1 and clients[0].stream.was_closed and not clients[1].stream.was_closed

@@ -161,6 +161,9 @@ def add(commands) -> None:
     bench.add_argument("--storm", action="store_true",
                        help="with --lab --viewers N: N viewers joining and leaving at once for --seconds, and 6 that "
                             "never read; /status's latency and the server's memory throughout and after")
+    bench.add_argument("--soak", action="store_true",
+                       help="with --lab: one presenter and --viewers N (10) viewers' pages open for --seconds (3600 "
+                            "for an hour); the server's memory over that time and what the lab holds")
     bench.set_defaults(handler=_bench, printer=_print_bench)
 
 
@@ -170,6 +173,8 @@ def choose_handler(args) -> None:
         raise GranLabError("--viewers goes with --lab: granlab bench --lab --viewers N")
     if args.storm and not args.lab:
         raise GranLabError("--storm goes with --lab: granlab bench --lab --storm --viewers N")
+    if args.soak and not args.lab:
+        raise GranLabError("--soak goes with --lab: granlab bench --lab --soak --seconds 3600")
     if args.lab:
         from granlab.app.lab import bench as lab_bench
 

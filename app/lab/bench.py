@@ -30,6 +30,7 @@ resident memory.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -62,6 +63,10 @@ start once the clients left."""
 STORM_STUCK = 6
 STORM_SETTLE = 5.0  # seconds watched before the clients come
 STORM_AFTER = 60.0  # and after they left
+SOAK_TARGET_MIB_PER_HOUR = 10.0
+"""Issue 61's soak: the server's resident memory grows by at most this once its first minutes are past."""
+SOAK_SETTLE = 300.0  # seconds after the pages opened left out of the growth (the series and history fill)
+SOAK_EVERY = 10.0  # seconds between two samples
 SCENE_UPDATE = "SceneNodeUpdateMessage /granlab/"  # most of the scene's keys: left out of the printed table
 CLASSROOM_WARMUP = 3.0  # seconds after the last page opened: each page's first messages are the whole scene
 
@@ -72,6 +77,12 @@ def handler(args) -> dict:
             raise GranLabError("bench --lab --storm takes --viewers N (clients joining and leaving, N >= 1) and "
                                f"--seconds > 0, not {args.viewers} and {args.seconds}")
         return storm(args.viewers, args.seconds, STORM_STUCK, args.particles)
+    if args.soak:
+        viewers = 10 if args.viewers is None else args.viewers
+        if viewers < 0 or args.seconds <= SOAK_SETTLE:
+            raise GranLabError(f"bench --lab --soak takes --viewers N >= 0 (10 by default) and --seconds above "
+                               f"{SOAK_SETTLE:.0f} (its first minutes are left out), not {viewers} and {args.seconds}")
+        return soak(viewers, args.seconds, args.particles)
     if args.viewers is not None:
         if args.viewers < 1 or args.seconds <= 0:
             raise GranLabError(f"bench --lab --viewers takes --viewers >= 1 and --seconds > 0, not {args.viewers} and "
@@ -284,6 +295,9 @@ def print_result(r: dict) -> None:
     if "storm" in r:
         print_storm(r)
         return
+    if "soak" in r:
+        print_soak(r)
+        return
     mark = {True: "ok", False: "BELOW TARGET"}
     print(f"lab benchmark, ratchet preset, {r['particles']} disks, one tab")
     print(f"  granlab bench (1 thread):  {r['bench_1_thread'] / 1e6:.2f} M particle-steps/s")
@@ -378,28 +392,15 @@ def storm(clients: int, seconds: float, stuck: int = STORM_STUCK, particles: int
     this one throughout, and STORM_AFTER s after they left, with the server's resident memory."""
     load = os.getloadavg()[0]
     samples = []
-    with tempfile.TemporaryDirectory() as data, tempfile.TemporaryDirectory() as work:
-        options = ("--particles", str(particles)) if particles else ()
-        process, presenter, viewer = spawn(data, "--tokens", *options)
-        try:
-            status_url = presenter.replace("/?", "/status?")
-            _watch(status_url, process.pid, time.monotonic() + STORM_SETTLE, samples, "before")
-            spec, out, errors = Path(work, "spec.json"), Path(work, "result.json"), Path(work, "stderr")
-            spec.write_text(json.dumps({"storm": True, "viewer": viewer, "clients": clients, "stuck": stuck,
-                                        "seconds": seconds, "out": str(out)}))
-            with errors.open("w") as stderr:
-                client = subprocess.Popen([sys.executable, "-m", "granlab.app.lab.classroom", str(spec)],
-                                          stdout=subprocess.DEVNULL, stderr=stderr)
-            while client.poll() is None:
-                _watch(status_url, process.pid, time.monotonic() + 1.0, samples, "storm")
-            if client.returncode != 0:
-                raise GranLabError(f"the storm's clients failed: {errors.read_text().strip()[-500:]}")
-            _watch(status_url, process.pid, time.monotonic() + STORM_AFTER, samples, "after")
-            clients_saw = json.loads(out.read_text())
-            last = json.loads(_get(status_url))
-        finally:
-            process.terminate()
-            process.wait(timeout=30)
+    with _token_lab(particles) as (process, presenter, viewer, status_url), tempfile.TemporaryDirectory() as work:
+        _watch(status_url, process.pid, time.monotonic() + STORM_SETTLE, samples, "before")
+        crowd = _clients(work, {"storm": True, "viewer": viewer, "clients": clients, "stuck": stuck,
+                                  "seconds": seconds})
+        while crowd.poll() is None:
+            _watch(status_url, process.pid, time.monotonic() + 1.0, samples, "storm")
+        clients_saw = _clients_saw(crowd, work, "storm")
+        _watch(status_url, process.pid, time.monotonic() + STORM_AFTER, samples, "after")
+        last = json.loads(_get(status_url))
     phases = {}
     for phase in ("before", "storm", "after"):
         rows = [row for row in samples if row[0] == phase]
@@ -414,6 +415,82 @@ def storm(clients: int, seconds: float, stuck: int = STORM_STUCK, particles: int
             "pages": last["pages"], "targets": STORM_TARGETS,
             "pass": {"status": all(phases[p]["status_ms"]["max"] <= STORM_TARGETS["status_ms"] for p in phases),
                      "memory": end - start <= STORM_TARGETS["memory_back_mib"]}}
+
+
+def soak(viewers: int, seconds: float, particles: int | None = None) -> dict:
+    """The lab (ratchet, ``particles`` disks, 256 by default, served with tokens) with one presenter's and
+    ``viewers`` viewers' pages open and reading (:func:`granlab.app.lab.classroom.soak`, a process apart) for
+    ``seconds`` s: the server's resident memory every SOAK_EVERY s, its growth per hour after SOAK_SETTLE s
+    (a least-squares line), and what ``/status`` says the lab holds."""
+    samples = []
+    with _token_lab(particles) as (process, presenter, viewer, status_url), tempfile.TemporaryDirectory() as work:
+        opened = Path(work, "opened")
+        crowd = _clients(work, {"soak": True, "presenter": presenter, "viewer": viewer, "viewers": viewers,
+                                  "seconds": seconds, "opened": str(opened)})
+        while not opened.exists() and crowd.poll() is None:
+            time.sleep(0.5)
+        start = time.monotonic()
+        while crowd.poll() is None:
+            status = json.loads(_get(status_url))
+            samples.append((time.monotonic() - start, resident_mib(process.pid), status["memory"], status["time"]))
+            time.sleep(SOAK_EVERY)
+        clients_saw = _clients_saw(crowd, work, "soak")
+    late = [(t, rss) for t, rss, _, _ in samples if t >= SOAK_SETTLE]
+    mean_t, mean_rss = statistics.fmean(t for t, _ in late), statistics.fmean(rss for _, rss in late)
+    slope = sum((t - mean_t) * (rss - mean_rss) for t, rss in late) / sum((t - mean_t) ** 2 for t, _ in late)
+    return {"soak": True, "viewers": viewers, "seconds": seconds, "particles": particles or 256,
+            "cores": os.cpu_count(), "rss_mib": [(t, rss) for t, rss, _, _ in samples],
+            "settle_s": SOAK_SETTLE, "growth_mib_per_hour": 3600.0 * slope, "target_mib_per_hour":
+            SOAK_TARGET_MIB_PER_HOUR, "holds": samples[-1][2], "simulated": [samples[0][3], samples[-1][3]],
+            "clients_saw": clients_saw, "pass": 3600.0 * slope <= SOAK_TARGET_MIB_PER_HOUR}
+
+
+def print_soak(r: dict) -> None:
+    rss = r["rss_mib"]
+    at = {mark: next((mib for t, mib in rss if t >= mark), rss[-1][1]) for mark in (0.0, 60.0, r["settle_s"])}
+    holds = r["holds"]
+    print(f"soak: one presenter and {r['viewers']} viewers' pages for {r['seconds']:.0f} s, ratchet at "
+          f"{r['particles']} disks, {r['cores']} cores (t = {r['simulated'][0]:.0f} to {r['simulated'][1]:.0f})")
+    print(f"  server MiB: {at[0.0]:.0f} as the pages opened, {at[60.0]:.0f} at 1 min, {at[r['settle_s']]:.0f} at "
+          f"{r['settle_s'] / 60:.0f} min, {rss[-1][1]:.0f} at the end; after {r['settle_s'] / 60:.0f} min "
+          f"{r['growth_mib_per_hour']:+.1f} MiB an hour (target <= {r['target_mib_per_hour']:g})"
+          + ("" if r["pass"] else " (!)"))
+    series = ", ".join(f"{name} {mib:.0f} ({100 * holds['series_filled'][name]:.0f} % filled)"
+                       for name, mib in holds["series_mib"].items())
+    print(f"  the lab holds: series {series}; frames kept {holds['history_mib']:.0f} of "
+          f"{holds['history_limit_mib']:.0f} MiB; resident {holds['resident_mib']:.0f} MiB")
+    print(f"  the pages received {r['clients_saw']['bokeh_mb']:.0f} MB of plots and values and "
+          f"{r['clients_saw']['scene_frames']} scene frames")
+
+
+@contextlib.contextmanager
+def _token_lab(particles: int | None):
+    """A lab served with tokens (ratchet, ``particles`` disks): its process, the presenter's and viewers'
+    addresses and the presenter's ``/status``; stopped on the way out."""
+    with tempfile.TemporaryDirectory() as data:
+        options = ("--particles", str(particles)) if particles else ()
+        process, presenter, viewer = spawn(data, "--tokens", *options)
+        try:
+            yield process, presenter, viewer, presenter.replace("/?", "/status?")
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+
+
+def _clients(work: str, spec: dict) -> subprocess.Popen:
+    """The light clients of ``spec`` (:mod:`.classroom`) started in a process apart, their files in ``work``."""
+    spec_file = Path(work, "spec.json")
+    spec_file.write_text(json.dumps({**spec, "out": str(Path(work, "result.json"))}))
+    with Path(work, "stderr").open("w") as stderr:
+        return subprocess.Popen([sys.executable, "-m", "granlab.app.lab.classroom", str(spec_file)],
+                                stdout=subprocess.DEVNULL, stderr=stderr)
+
+
+def _clients_saw(clients: subprocess.Popen, work: str, what: str) -> dict:
+    """What the clients of :func:`_clients` reported, once their process ended."""
+    if clients.wait() != 0:
+        raise GranLabError(f"the {what}'s clients failed: {Path(work, 'stderr').read_text().strip()[-500:]}")
+    return json.loads(Path(work, "result.json").read_text())
 
 
 def _get(url: str) -> bytes:

@@ -417,10 +417,32 @@ async def storm(spec: dict) -> dict:
             "page_seconds": {"median": statistics.median(seconds), "max": max(seconds)} if seconds else None}
 
 
+async def soak(spec: dict) -> dict:
+    """The presenter's and ``spec["viewers"]`` viewers' sessions open, reading, for ``spec["seconds"]`` s; what
+    they received."""
+    sessions = [Session(spec["presenter"]), *(Session(spec["viewer"]) for _ in range(spec["viewers"]))]
+    for session in sessions:
+        await session.open()
+    Path(spec["opened"]).touch()
+    try:
+        deadline = time.monotonic() + spec["seconds"]
+        while time.monotonic() < deadline:
+            await asyncio.sleep(min(5.0, max(0.0, deadline - time.monotonic())))
+            failed = next((error for error in map(Session.failed, sessions) if error is not None), None)
+            if failed is not None:
+                raise RuntimeError(f"a session's websocket failed: {failed!r}")
+        received = [session.snapshot() for session in sessions]
+    finally:
+        for session in sessions:
+            await session.close()
+    return {"bokeh_mb": sum(r["bokeh"]["bytes"] for r in received) / 1e6,
+            "scene_frames": sum(r["scene"]["frames"] for r in received)}
+
+
 def main(argv: list[str]) -> int:
     spec = json.loads(Path(argv[0]).read_text())
     try:
-        result = asyncio.run(storm(spec) if spec.get("storm") else classroom(spec))
+        result = asyncio.run(storm(spec) if spec.get("storm") else soak(spec) if spec.get("soak") else classroom(spec))
     except Exception as error:  # one line for the bench to show: the clients' process has no terminal
         print(f"{type(error).__name__}: {error}", file=sys.stderr)
         return 1

@@ -58,7 +58,8 @@ SERIES_CAPACITY = {"contacts": 1_000_000, "time": 400_000, "block": 400_000, "sp
 """Rows each series keeps (a tab that falls further behind gets the newest ones), and so a save
 holds: the watched paths of ratchet16 (320 samples of 6 contacts a cycle) for its last 520 cycles,
 so that a replay draws the cone plot at the frames of those (ratchet16 keeps the frames of 1350
-cycles, ratchet those of 90). A buffer's memory is taken as rows come (at most 48 MB for the paths)."""
+cycles, ratchet those of 90). A buffer's memory is taken when its preset starts (48 MB for the paths; the
+ratchet's three series 78 MiB in all) and goes with it."""
 MOVIE_SUFFIXES = (".gif", ".mp4")
 REPLAY_SUFFIXES = (".h5", ".h5md", ".dump", ".xyz")
 
@@ -196,8 +197,8 @@ class LabEngine:
 
     def series(self, name: str, cursor: Cursor):
         buffer = self.buffers.get(name)
-        if buffer is None:
-            return cursor, True, {}
+        if buffer is None:  # a series this run has not
+            return Cursor(run=self.run), True, {}
         return buffer.since(cursor)
 
     def saved_files(self) -> list[str]:
@@ -405,8 +406,8 @@ class LabEngine:
             if name not in self.buffers:
                 self.buffers[name] = SeriesBuffer(columns, SERIES_CAPACITY.get(name, 40000))
             self.buffers[name].reset(columns, run=self.run)
-        for name in self.buffers.keys() - series.keys():
-            self.buffers[name].reset(run=self.run)
+        for name in self.buffers.keys() - series.keys():  # its memory goes: a lab runs through every preset
+            del self.buffers[name]
 
     def _reanchor(self) -> None:
         """Pace from now on: simulated time advances at the chosen speed from the current state."""
@@ -555,7 +556,7 @@ class LabEngine:
                       particle_steps_per_s=sum(r[1] for r in self._rate) / seconds if seconds else 0.0,
                       speed_achieved=simulated / span / status["cycle_time"] if span > 0 and self.running else 0.0,
                       presets=list(PRESETS), command_ms=self.command_ms, history_frames=len(self._history),
-                      history_mib=self._history_bytes / 2 ** 20,
+                      history_mib=self._history_bytes / 2 ** 20, memory=self._memory(),
                       analysis_seq=self.analysis.latest().seq, analysis_busy=self.analysis.busy,
                       jobs=[job.describe() for job in self.jobs.running()],
                       message_seq=self.messages.latest_seq)
@@ -567,6 +568,14 @@ class LabEngine:
                 self._frame_seq += 1
                 self._frame_taken = False
                 self._frame_ready.set()
+
+    def _memory(self) -> dict:
+        """What the engine holds, in MiB (``/status``'s ``memory``): each series' buffer (taken whole when its
+        preset starts) and the share of it rows fill, and the frames kept for saves and movies with their limit."""
+        buffers = list(self.buffers.items())
+        return {"series_mib": {name: buffer.nbytes / 2 ** 20 for name, buffer in buffers},
+                "series_filled": {name: len(buffer) / buffer.capacity for name, buffer in buffers},
+                "history_mib": self._history_bytes / 2 ** 20, "history_limit_mib": self.history_limit / 2 ** 20}
 
     def _state(self) -> str:
         if self.error:

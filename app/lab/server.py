@@ -242,6 +242,7 @@ class Lab:
         status["stream_viewers"] = len(self.stream.sockets)
         status["pages"] = self.gate.state()
         status["memory_releases"] = self.releases
+        status["memory"] = {**status.get("memory", {}), "resident_mib": _resident_mib()}
         return status
 
     def _session(self):
@@ -382,6 +383,14 @@ def gated_pages():
         yield
     finally:
         patterns[:] = saved
+
+
+def _resident_mib() -> float | None:
+    """This process's resident memory in MiB (None where there is no /proc)."""
+    try:
+        return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    except OSError:
+        return None
 
 
 def _free_port(host: str) -> int:
