@@ -216,7 +216,10 @@ class LinePlot(LivePlot):
     def __init__(self, name, title, series, lines, x_label, y_label, columns, **kwargs):
         super().__init__(name, lab_figure(name, title, x_label, y_label, **kwargs))
         self.reads = (series,)
-        self.source = ColumnDataSource(_empty(columns), name=f"series-{name}")
+        # only the columns its lines draw: each page's server-side document keeps up to LINE_ROLLOVER rows of
+        # them, and the energy and coordination plots held all nine of the ratchet's (3.5 MB a page more)
+        drawn = {column for line in lines for column in line[:2]}
+        self.source = ColumnDataSource(_empty([column for column in columns if column in drawn]), name=f"series-{name}")
         self.sources = [self.source]
         self.lines = lines
         for x, y, label, color, *dash in lines:
