@@ -438,6 +438,10 @@ class Dashboard:
         if command in ("defaults", "reset"):  # (a preset switch: _new_source)
             self._restart_values_shown = {}  # the settings in effect, N and seed too, back in every box
             self._asked = {}  # and no value asked before keeps its box: Defaults answers them all
+        # the widgets this page changed no longer show the settings it showed last: the next refresh shows
+        # those in effect even when the engine comes back to them (a value changed, then Defaults, between
+        # two late refreshes, left N and ζ on the values the page had asked for)
+        self._settings_shown = None
         self.engine.submit(command, **payload)
 
     def _clear_errors(self) -> None:

@@ -242,6 +242,7 @@ class Lab:
         status["stream_viewers"] = len(self.stream.sockets)
         status["pages"] = self.gate.state()
         status["memory_releases"] = self.releases
+        status["memory_release_pending"] = self._release_pending
         status["memory"] = {**status.get("memory", {}), "resident_mib": _resident_mib()}
         return status
 
@@ -297,12 +298,14 @@ class Lab:
         return None
 
     def _closed(self, session_context) -> None:
-        self.engine.tabs = max(0, self.engine.tabs - 1)  # only a dashboard's session counts its tab
-        self.engine.submit("tab_closed")
+        # the release is asked for before the tab is counted out: "no tab and no release pending" in
+        # /status then means the last closed tab's memory has been handed back
         if MALLOC_TRIM is not None and not self._release_pending:
             self._release_pending = True
             wait = max(TRIM_DELAY, self._released + RELEASE_EVERY - time.monotonic())
             self.server.io_loop.call_later(wait, self._release_memory)
+        self.engine.tabs = max(0, self.engine.tabs - 1)  # only a dashboard's session counts its tab
+        self.engine.submit("tab_closed")
 
     def _release_memory(self) -> None:
         """Collect the closed sessions' documents (reference cycles) and hand the freed heap back."""
