@@ -8,6 +8,7 @@ import pytest
 
 from granlab.app.lab.dashboard import Dashboard
 from granlab.app.lab.engine_thread import LabEngine
+from granlab.app.lab.plots import VIEWER_SHARE
 from granlab.app.lab.scene import SceneView
 
 from .test_lab_engine import wait
@@ -42,3 +43,15 @@ def test_defaults_shown_after_the_page_changed_settings_between_two_refreshes(da
     wait(lambda: engine.status()["settings"] == defaults and engine.status()["particles"] == 16)
     page._update()
     assert (page.particles.value, page.damping.value) == (16, defaults["damping_ratio"])
+
+
+def test_a_viewers_page_keeps_its_share_of_the_rows_and_says_what_its_plots_hold(dashboard):
+    """A viewer's plots keep VIEWER_SHARE of each rollover (the server holds a copy of every page's);
+    what they hold is counted in bytes for /status."""
+    engine = dashboard.engine
+    viewer = Dashboard(engine, dashboard.scene, "/viewer-scene", viewer=True)
+    for page in (dashboard, viewer):
+        page._update()
+    wait(lambda: viewer._update() or viewer.plot_bytes() > 0)
+    assert {plot.share for plot in viewer.shown} == {VIEWER_SHARE}
+    assert {plot.share for plot in dashboard.shown} == {1.0}

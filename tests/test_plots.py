@@ -53,3 +53,16 @@ def test_each_collision_is_a_loop_of_its_own_in_the_force_overlap_plot():
                             (("t", 1.2), ("collision", 2.0), ("overlap", 0.002), ("force", 80.0), ("spring", 20.0))},
               False, {})
     assert list(plot.lines["force"][0].data["y0"]) == [90.0, 80.0, 90.0]  # from collision 2's first sample
+
+
+@pytest.mark.parametrize("share, kept", [(1.0, plots.LINE_ROLLOVER), (plots.VIEWER_SHARE, 10000)])
+def test_a_viewers_page_keeps_a_quarter_of_the_rows_and_says_what_it_holds(share, kept):
+    """The server holds a copy of every page's plots: a viewer's keeps the last 10 000 rows of a time
+    series (the presenter's 40 000), the newest ones, and its bytes are what those rows take."""
+    plot = plots.make_plot("coordination", "t", {"time": ("t", "z")})
+    plot.share = share
+    for start in range(0, 50000, 5000):
+        t = np.arange(start, start + 5000, dtype=float)
+        plot.feed("time", {"t": t, "z": 4.0 + 0 * t}, start == 0, {})
+    assert len(plot.source.data["t"]) == kept and plot.source.data["t"][-1] == 49999.0
+    assert plot.nbytes() == 2 * 8 * kept

@@ -41,7 +41,7 @@ from .live import UPDATE_SECONDS, LiveText, describe
 from .pace import DRAW_WAIT_SECONDS, Pacer
 from .preferences import CALM_SECONDS, Preferences
 from ..media.drawing import COLOR_FIELDS, legend_html
-from .plots import WAITS, AnalysisFigures, compact, make_plot
+from .plots import VIEWER_SHARE, WAITS, AnalysisFigures, compact, make_plot
 
 STATIC = Path(__file__).resolve().parents[2] / "static"
 PRESET_OPTIONS = {cls.menu_name: name for name, cls in PRESETS.items()}
@@ -494,9 +494,14 @@ class Dashboard:
             if plot is None:  # a plot of the same name may read other columns in another preset
                 plot = self.plots[key] = make_plot(name, time_label, columns, reference_cycle)
                 plot.set_projector(self.preferences.projector)
+                plot.share = VIEWER_SHARE if self.viewer else 1.0
             for series in plot.reads:
                 self.cursors[series] = Cursor()
             self.shown.append(plot)
+
+    def plot_bytes(self) -> int:
+        """The bytes this page's plots hold (on the server, a copy of what its browser draws)."""
+        return sum(plot.nbytes() for plot in self.plots.values())
 
     @staticmethod
     def _plot_column(panes: list) -> pn.Column:

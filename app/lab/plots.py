@@ -34,6 +34,10 @@ TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 LINE_ROLLOVER = 40000
 PATH_ROLLOVER = 12000
 """Rows a tab keeps of a time series, and segments of a path (a few load cycles of watched contacts)."""
+VIEWER_SHARE = 0.25
+"""The share of those a viewer's page keeps (10 000 rows: 50 load cycles of the ratchet, five times what its
+plots follow): the server holds a copy of every page's plots, and a class of forty pages at the presenter's
+share would hold 160 MiB, taken over an hour as the rows come."""
 DOTS_ROLLOVER = 2000
 """The restitution plot's last collisions: at "max" speed some 30 a second land on a few places."""
 PLOT_HEIGHT = 316
@@ -173,6 +177,17 @@ class LivePlot:
         self.sources: list[ColumnDataSource] = []
         self.pane = pn.pane.Bokeh(fig, sizing_mode="stretch_both", min_height=PLOT_HEIGHT, margin=(0, 4, 4, 0))
         self._base_widths: dict = {}
+        self.share = 1.0
+        """The share of each rollover this plot keeps (VIEWER_SHARE on a viewer's page)."""
+
+    def rows(self, rollover: int) -> int:
+        """The rows this plot keeps of a source whose rollover is ``rollover``."""
+        return max(1, int(rollover * self.share))
+
+    def nbytes(self) -> int:
+        """The bytes of the columns its sources hold (the server keeps them for the page)."""
+        return sum(values.nbytes if isinstance(values, np.ndarray) else 8 * len(values)
+                   for source in self.sources for values in source.data.values())
 
     def set_projector(self, on: bool) -> None:
         set_projector(self.figure, on, self._base_widths)
@@ -237,7 +252,7 @@ class LinePlot(LivePlot):
             self.marks._shown = None
 
     def feed(self, series, columns, reset, status):
-        _stream(self.source, columns, reset, LINE_ROLLOVER)
+        _stream(self.source, columns, reset, self.rows(LINE_ROLLOVER))
 
     def refresh(self, status):
         """Plots against time follow the last ``window`` of simulated time (a few load cycles, so
@@ -395,12 +410,12 @@ class LoadStrainPlot(LivePlot):
     def feed(self, series, columns, reset, status):
         if reset:
             self.segments.reset()
-        columns = _last(columns, PATH_ROLLOVER)
+        columns = _last(columns, self.rows(PATH_ROLLOVER))
         cycle = np.asarray(columns.get("cycle", []))
         keep = cycle >= 0
         rows = self.segments.add(np.zeros((int(keep.sum()), 1)), np.asarray(columns.get("gamma", []))[keep],
                                  np.asarray(columns.get("q", []))[keep], {"cycle": cycle[keep]})
-        _stream(self.source, rows, reset, PATH_ROLLOVER)
+        _stream(self.source, rows, reset, self.rows(PATH_ROLLOVER))
         if len(cycle) and cycle[keep].size:
             self.cycle = int(cycle[keep].max())
         self.mapper.low, self.mapper.high = max(0, self.cycle - CYCLES_SHOWN + 1) - 0.5, self.cycle + 0.5
@@ -446,7 +461,7 @@ class ConePlot(LivePlot):
     def feed(self, series, columns, reset, status):
         if reset:
             self.segments.reset()
-        columns = _last(columns, PATH_ROLLOVER)
+        columns = _last(columns, self.rows(PATH_ROLLOVER))
         normal = np.asarray(columns.get("normal", []), dtype=float)
         tangential = np.asarray(columns.get("tangential", []), dtype=float)
         state = np.asarray(columns.get("status", []), dtype=int)
@@ -464,7 +479,7 @@ class ConePlot(LivePlot):
         names = np.array([labels.get(p, "%d–%d" % p) for p in paths] or [""])
         rows = self.segments.add(pairs, normal, tangential, {"t": columns.get("t", []), "color": colors[path],
                                                              "label": names[path]})
-        _stream(self.paths, rows, reset, PATH_ROLLOVER)
+        _stream(self.paths, rows, reset, self.rows(PATH_ROLLOVER))
         if len(normal):
             self.top = max(self.top, float(np.abs(normal).max()))
         slides = np.flatnonzero(sliding(state))
@@ -472,7 +487,7 @@ class ConePlot(LivePlot):
         marks = {"x": normal[slides], "y": tangential[slides],
                  "color": np.where(positive, STATUS_LEGEND[STATUS_SLIDE_POS][1], STATUS_LEGEND[STATUS_SLIDE_NEG][1]),
                  "marker": np.where(positive, "triangle", "inverted_triangle")}
-        _stream(self.sliding, marks, reset, PATH_ROLLOVER)
+        _stream(self.sliding, marks, reset, self.rows(PATH_ROLLOVER))
 
     def refresh(self, status):
         settings = status.get("settings") or {}
@@ -520,11 +535,11 @@ class CollisionForcePlot(LivePlot):
             segments.reset()
 
     def feed(self, series, columns, reset, status):
-        columns = _last(columns, PATH_ROLLOVER)
+        columns = _last(columns, self.rows(PATH_ROLLOVER))
         keys = np.asarray(columns.get("collision", []), dtype=int).reshape(-1, 1)
         for column, (source, segments) in self.lines.items():
             _stream(source, segments.add(keys, columns.get("overlap", []), columns.get(column, []), {}), reset,
-                    PATH_ROLLOVER)
+                    self.rows(PATH_ROLLOVER))
 
 
 class RestitutionPlot(LivePlot):
@@ -550,7 +565,7 @@ class RestitutionPlot(LivePlot):
         legend_beside(fig)
 
     def feed(self, series, columns, reset, status):
-        _stream(self.points, columns, reset, DOTS_ROLLOVER)
+        _stream(self.points, columns, reset, self.rows(DOTS_ROLLOVER))
         if len(columns.get("restitution", ())):
             zeta, measured, predicted = columns["zeta"][-1], columns["restitution"][-1], columns["predicted"][-1]
             self.figure.title.text = f"e_N = {measured:.4f} measured, {predicted:.4f} predicted (ζ = {zeta:.2f})"

@@ -33,6 +33,7 @@ import threading
 import time
 import urllib.parse
 import urllib.request
+import weakref
 from collections import deque
 from pathlib import Path
 
@@ -178,6 +179,8 @@ class Lab:
         self._release_pending = False
         self._released = -RELEASE_EVERY
         self.releases = 0
+        self.pages: weakref.WeakSet[Dashboard] = weakref.WeakSet()
+        """The pages open (a page goes with its session's document)."""
         """The memory releases done since the start (``/status``: ``memory_releases``)."""
         self._scene_thread = threading.Thread(target=self._push_scene, name="granlab-scene", daemon=True)
         # the page loads bokeh's and panel's files from this server, whatever BOKEH_RESOURCES the
@@ -243,7 +246,8 @@ class Lab:
         status["pages"] = self.gate.state()
         status["memory_releases"] = self.releases
         status["memory_release_pending"] = self._release_pending
-        status["memory"] = {**status.get("memory", {}), "resident_mib": _resident_mib()}
+        status["memory"] = {**status.get("memory", {}), "resident_mib": _resident_mib(),
+                            "pages_mib": sum(page.plot_bytes() for page in list(self.pages)) / 2**20}
         return status
 
     def _session(self):
@@ -278,7 +282,9 @@ class Lab:
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
         query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items()
                  if values and isinstance(values[0], bytes)}
-        return Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query).view()
+        page = Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query)
+        self.pages.add(page)
+        return page.view()
 
     def _presenter_path(self, path: str) -> bool:
         """Whether a scene client connected with the presenter's token (only its clicks watch a disk)."""
