@@ -371,7 +371,9 @@ def test_a_class_larger_than_the_lab_holds_is_told_so_and_the_presenter_always_g
         viewers = [Session(small_class_lab["viewer"]) for _ in range(2)]
         for session in viewers:
             loop.run(session.open())
-        assert pages(small_class_lab)["viewers"] == 2
+        opened = pages(small_class_lab)
+        assert opened["viewers"] == 2
+        assert opened["made_beside_the_loop"] >= 2  # the widgets of each page made beside the server's loop
         body = []
         assert status_of(small_class_lab["viewer"], body=body) == 503
         assert "The class is full: this lab holds 2 viewers' pages" in body[0] and "refresh" in body[0]

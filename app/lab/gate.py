@@ -8,7 +8,8 @@ anyway. So:
 
 - pages are built one at a time (:meth:`SessionGate.admit`), the loop answering everything else
   between two builds; the presenter's page goes before any viewer's waiting; a client that left
-  while it waited has no page built;
+  while it waited has no page built; a page's widgets are made in a thread beside the loop, which
+  is left only bokeh's own models to make;
 - at most ``max_viewers`` viewers' pages are open or waiting: one more is told the class is full (a
   small page, 503, that tries again by itself) without a session being built;
 - a client that stops reading is dropped once what waits to be sent to it passes
@@ -21,6 +22,7 @@ import asyncio
 import collections
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from panel.io.server import DocHandler
 
@@ -54,6 +56,8 @@ class SessionGate:
         """Clients that left while their page waited to be built, since the start."""
         self.dropped = 0
         """Clients dropped for not reading, since the start."""
+        self.made_beside = 0
+        """Pages whose widgets were made in the gate's thread, beside the loop, since the start."""
         self._building = False
         self._waiting = {"presenter": collections.deque(), "viewer": collections.deque()}
 
@@ -85,7 +89,8 @@ class SessionGate:
     def state(self) -> dict:
         """What ``/status`` says of the gate."""
         return {"viewers": self.viewers, "max_viewers": self.max_viewers, "waiting": self.waiting,
-                "refused_full": self.full, "left_waiting": self.gone, "dropped_not_reading": self.dropped}
+                "refused_full": self.full, "left_waiting": self.gone, "dropped_not_reading": self.dropped,
+                "made_beside_the_loop": self.made_beside}
 
     async def admit(self, handler, role: str) -> bool:
         """Wait until this page may be built; False where it is not (the class is full, said on the
@@ -121,9 +126,16 @@ class SessionGate:
         self._building = False
 
 
+BUILDER = ThreadPoolExecutor(1, thread_name_prefix="granlab-page")
+"""Where a page's Python objects are made, beside the loop (one at a time, as the gate lets them)."""
+
+
 class GatedDocHandler(DocHandler):
     """Panel's page handler, its session built only once :class:`SessionGate` lets it (the gate and the
-    request's role are the lab's ``application.granlab_gate`` and ``current_user``)."""
+    request's role are the lab's ``application.granlab_gate`` and ``current_user``). Where the lab gives
+    ``application.granlab_prebuild(request, role)``, what it returns is made in :data:`BUILDER`'s thread
+    and left on the request as ``granlab_page`` for the session to take: half a page's build is making its
+    widgets, and made on the loop it kept ``/status`` waiting."""
 
     _holds = False
 
@@ -137,6 +149,11 @@ class GatedDocHandler(DocHandler):
                 self.finish()
             return
         self._holds = True
+        prebuild = getattr(self.application, "granlab_prebuild", None)
+        if prebuild is not None:
+            self.request.granlab_page = await asyncio.get_running_loop().run_in_executor(
+                BUILDER, prebuild, self.request, self.current_user)
+            gate.made_beside += self.request.granlab_page is not None
 
     def on_finish(self):
         self._release()

@@ -202,6 +202,7 @@ class Lab:
                 # bokeh's and panel's scripts in 0.8 MB rather than 3.0 MB
                 compress_response=True)
         self.server._tornado.granlab_gate = self.gate
+        self.server._tornado.granlab_prebuild = self._prebuild
         self._stalled = tornado.ioloop.PeriodicCallback(self._drop_stalled, STALLED_CHECK_MS)
 
     def _drop_stalled(self) -> None:
@@ -272,7 +273,24 @@ class Lab:
         if role == "viewer":
             self.gate.opened(pn.state.curdoc.session_context)
             pn.state.on_session_destroyed(self.gate.closed)
-        host = (pn.state.headers.get("Host") or self.host).rsplit(":", 1)[0] if pn.state.headers else self.host
+        page = getattr(request, "granlab_page", None)  # made beside the loop as the page's GET had its turn
+        request.granlab_page = None
+        if page is None or page.viewer != (role == "viewer"):  # a session made as its websocket opened
+            page = self._dashboard(pn.state.headers.get("Host") if pn.state.headers else None, role,
+                                   pn.state.session_args)
+        self.pages.add(page)
+        return page.view()
+
+    def _prebuild(self, request, role: str | None) -> Dashboard | None:
+        """The page of a GET that the gate let through, made in the gate's thread (None before the engine
+        runs, or for a request without a role: the session says why)."""
+        if self.engine is None or role is None:
+            return None
+        return self._dashboard(request.headers.get("Host"), role, request.query_arguments)
+
+    def _dashboard(self, host_header: str | None, role: str, arguments: dict) -> Dashboard:
+        """The page of ``role`` asked for as ``host_header`` with the query ``arguments`` (name -> bytes)."""
+        host = (host_header or self.host).rsplit(":", 1)[0]
         scene_url = f"http://{host}:{self.scene.port}/"
         token = self.access.token(role)
         viewer = role == "viewer"
@@ -280,11 +298,9 @@ class Lab:
             scene_url = "/viewer-scene?token=" + urllib.parse.quote(token)
         elif token:  # viser's client drops the page's query; its websocket address may carry a path
             scene_url += "?websocket=" + urllib.parse.quote(f"ws://{host}:{self.scene.port}/{token}", safe="")
-        query = {key: values[0].decode(errors="replace") for key, values in pn.state.session_args.items()
+        query = {key: values[0].decode(errors="replace") for key, values in arguments.items()
                  if values and isinstance(values[0], bytes)}
-        page = Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query)
-        self.pages.add(page)
-        return page.view()
+        return Dashboard(self.engine, self.scene, scene_url, viewer=viewer, query=query)
 
     def _presenter_path(self, path: str) -> bool:
         """Whether a scene client connected with the presenter's token (only its clicks watch a disk)."""
