@@ -66,3 +66,21 @@ def test_a_viewers_page_keeps_a_quarter_of_the_rows_and_says_what_it_holds(share
         plot.feed("time", {"t": t, "z": 4.0 + 0 * t}, start == 0, {})
     assert len(plot.source.data["t"]) == kept and plot.source.data["t"][-1] == 49999.0
     assert plot.nbytes() == 2 * 8 * kept
+
+
+def test_the_strain_plot_keeps_its_last_cycles_measured_from_the_reference():
+    """A school day cycles some 20 000 times: the plot keeps the last CYCLES_ROLLOVER cycles (a viewer's
+    page its share), their strain still counted from the reference cycle, and draws those."""
+    plot = plots.StrainPlot(reference=2)
+    plot.share = plots.VIEWER_SHARE
+    kept = plot.rows(plots.CYCLES_ROLLOVER)
+    status = {"fit_from": {"cycle": 2, "after": ""}}
+    for start in range(0, 3 * kept, 100):
+        cycles = np.arange(start, start + 100)
+        plot.feed("cycles", {"cycle": cycles, "gamma": 1e-8 * cycles}, start == 0, status)
+        plot.refresh(status)
+    assert kept <= len(plot.cycles) <= kept + kept // 4 + 2 and 2 in plot.cycles
+    drawn = plot.points.data["cycle"]
+    assert drawn[-1] == 3 * kept - 1 and len(drawn) < kept + kept // 4 + 1
+    assert plot.points.data["strain"][-1] == pytest.approx(1e-8 * (3 * kept - 1 - 2))
+    assert plot.figure.x_range.start == drawn[0] - 0.5

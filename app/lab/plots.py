@@ -40,6 +40,9 @@ plots follow): the server holds a copy of every page's plots, and a class of for
 share would hold 160 MiB, taken over an hour as the rows come."""
 DOTS_ROLLOVER = 2000
 """The restitution plot's last collisions: at "max" speed some 30 a second land on a few places."""
+CYCLES_ROLLOVER = 2000
+"""The load cycles a strain plot keeps (the ratchet's reference cycle kept with them): each cycle redraws
+them all, and a school day at the highest speed cycles some 20 000 times."""
 PLOT_HEIGHT = 316
 """The least height of a plot: its drawing area is then at least 250 px under a one-line title,
 above its x axis (two plots fill the right of a 1366×768 screen; more scroll)."""
@@ -323,11 +326,15 @@ class StrainPlot(LivePlot):
         self.marks = ChangeMarks(fig, name, "cycle")
         self.cycles: dict[int, float] = {}
         self._shown = None
+        self._start = reference
+        self._oldest = 0
+        """The oldest cycle drawn (later than the first once the page has held CYCLES_ROLLOVER cycles)."""
 
     def clear(self):
         super().clear()
         self.cycles = {}
         self._shown = None
+        self._oldest = 0
         self.marks.source.data = {"x": [], "text": []}
         self.marks._shown = None
 
@@ -335,12 +342,17 @@ class StrainPlot(LivePlot):
         if reset:
             self.cycles = {}
         self.cycles.update(zip(map(int, columns.get("cycle", [])), columns.get("gamma", [])))
+        kept = self.rows(CYCLES_ROLLOVER)
+        if len(self.cycles) > kept + kept // 4:  # trimmed now and then, not at every cycle
+            self._oldest = max(self.cycles) - kept + 1
+            self.cycles = {cycle: gamma for cycle, gamma in self.cycles.items()
+                           if cycle >= self._oldest or cycle in (self.reference, self._start)}
 
     def refresh(self, status):
         self.marks.show(status.get("changes") or [])
         fit = status.get("strain")
         fit_from = status.get("fit_from") or {"cycle": self.reference, "after": ""}
-        start = fit_from["cycle"]
+        start = self._start = fit_from["cycle"]
         key = (len(self.cycles), start, fit_from.get("after"), None if fit is None else fit["dgamma"])
         if key == self._shown:
             return
@@ -356,13 +368,13 @@ class StrainPlot(LivePlot):
             fig.title.text = f"Strain per cycle, from cycle {first} (not reached yet)"
             return
         reference = start if start in self.cycles else first
-        cycles = np.array(sorted(c for c in self.cycles if c >= first), dtype=float)
+        cycles = np.array(sorted(c for c in self.cycles if c >= max(first, self._oldest)), dtype=float)
         strain = np.array([self.cycles[int(c)] for c in cycles]) - self.cycles[reference]
         fitted = cycles >= start
         self.points.data = {"cycle": cycles[fitted], "strain": strain[fitted]}
         self.before.data = {"cycle": cycles[~fitted], "strain": strain[~fitted]}
         self.settle_item.visible = bool(np.any(~fitted))  # a legend entry only for points drawn
-        fig.x_range.start, fig.x_range.end = first - 0.5, max(cycles[-1], start + 3) + 0.5
+        fig.x_range.start, fig.x_range.end = cycles[0] - 0.5, max(cycles[-1], start + 3) + 0.5
         low, high = float(strain.min()), float(strain.max())
         if fit is None:
             self.fit.data = {"cycle": [], "strain": []}
