@@ -14,8 +14,8 @@ from granlab.app.lab import lessons
 from granlab.app.lab.dashboard import SPEEDS
 from granlab.app.lab.server import spawn
 from granlab.engine.protocols.presets import PRESETS, preset_settings
-from tests.test_browser import (PAGE_REFRESH, lab_only, open_dashboard, scene, status, wait_model,
-                                wait_status)
+from tests.test_browser import PAGE_REFRESH, open_dashboard, scene, status, wait_model, wait_status
+from tests.test_browser_sessions import lab_only
 from tests.test_lab_access import status_of
 
 

@@ -25,8 +25,8 @@ def test_every_law_on_the_device_ends_where_the_cpu_engine_does():
     """A box of 16 disks pressed by loaded walls (overlap-area normal law, friction, rolling resistance)
     and 24 cohesive disks in a periodic cell under stress control with rolling resistance, each with the
     four tangential models, stepped by one block 32 steps a launch, two also in four launches a step (as a
-    larger table is); three boxes side by side in one batch being compressed (150 steps, rows rebuilt many
-    times), a block a box (each rebuilding its box's rows), then with segments too small (run again as one
+    larger table is); three boxes side by side in one batch being compressed (80 steps from the 50th, rows
+    rebuilt seven times), a block a box (each rebuilding its box's rows), then with segments too small (run again as one
     system), then as one system in one block and in four launches a step: a whole system's table rebuilt on the
     device as often as the CPU engine rebuilds its own, and at the end the state (disks, walls, cell), the
     energy ledger and the interacting contacts' springs and forces differ from the CPU

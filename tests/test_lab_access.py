@@ -1,6 +1,6 @@
 """Who may open what in a lab served with tokens, probed as a hostile client would, without a browser:
 forged session tokens, a viewer's cookie behind a presenter's page, foreign Host and Origin headers, a
-removed lock file, malformed messages. What a viewer could do once in is in test_browser.py."""
+removed lock file, malformed messages. What a viewer could do once in is in test_browser_sessions.py."""
 
 import asyncio
 import concurrent.futures
