@@ -77,8 +77,8 @@ M_ARENA_MAX = -8
 M_MMAP_THRESHOLD = -3
 MMAP_THRESHOLD = 64 * 1024
 """Bytes from which glibc maps a block of its own, handed back whole when freed. Left to glibc, the threshold
-rises to the largest block freed (32 MiB at most), and a page's frames then land in the arenas, where a class's
-pages fragment them: a quiet lab with ten viewers grew 51 MiB an hour so."""
+rises to the largest block freed (32 MiB at most), and the columns a page streams (80-320 kB each) then land
+in the arenas, where a class's pages fragment them: a quiet lab with ten viewers grew 51 MiB an hour so."""
 TRIM_DELAY = 2.0  # seconds after a tab's session ends (later ends within it share one release)
 RELEASE_EVERY = 10.0
 """Seconds between two releases at least: a full collection takes the loop for 0.1-0.3 s with forty pages open,
